@@ -1,0 +1,19 @@
+//! `sketchrodgs._core`: the compiled half of the Python package.
+//!
+//! Only glue lives here: each submodule extracts numpy inputs, calls a pure-Rust core crate
+//! with the GIL released, and hands the results back as numpy arrays without copying.
+
+use pyo3::prelude::*;
+
+mod errors;
+mod raster;
+mod rod;
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    raster::register(m)?;
+    rod::register(m)?;
+    Ok(())
+}
