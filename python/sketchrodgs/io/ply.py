@@ -1,0 +1,152 @@
+"""INRIA 3DGS `point_cloud.ply` (RASTER.md 2.1): read with plyfile, write in the reference layout."""
+
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+import plyfile
+
+from ..atomic import atomic_open
+from ..errors import SceneFormatError
+from ..scene import GaussianScene, sh_coefficient_count
+
+REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+            "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+_REST_COUNT_TO_DEGREE = {3 * (sh_coefficient_count(d) - 1): d for d in range(4)}
+_HEADER_LIMIT = 1 << 16  # a header longer than this is not a 3DGS file
+# Opacity is stored as a logit; 0 and 1 would be infinite, so they are pulled this far inside.
+_OPACITY_EPS = 1e-7
+_UNIT_NORM_SLACK = 2.0**-21  # a few float32 ulps around 1
+
+
+def reference_property_names(sh_degree: int) -> list[str]:
+    """Vertex property names in the order the reference 3DGS `save_ply` writes them."""
+    rest = 3 * (sh_coefficient_count(sh_degree) - 1)
+    return (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+            + [f"f_rest_{i}" for i in range(rest)]
+            + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+
+
+def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
+    """Read an INRIA 3DGS `.ply` (binary little/big endian or ASCII) into an activated scene.
+
+    Scales are exponentiated, opacities passed through the sigmoid and rotations normalised
+    (`rot_0` is w). Extra properties (normals, `transform`, ...) are ignored.
+    """
+    _check_header(path)
+    try:
+        data = plyfile.PlyData.read(os.fspath(path))
+    except Exception as exc:  # plyfile raises many types for bad bytes; name the file instead
+        raise SceneFormatError(f"{path}: malformed PLY ({type(exc).__name__}: {exc})") from None
+    names = [element.name for element in data.elements]
+    if "chunk" in names:
+        raise SceneFormatError(f"{path}: compressed PLY (PlayCanvas 'chunk' element) is not supported")
+    if "vertex" not in names:
+        raise SceneFormatError(f"{path}: no 'vertex' element (elements: {', '.join(names) or 'none'})")
+    vertex = data["vertex"]
+    if vertex.count == 0:
+        raise SceneFormatError(f"{path}: the 'vertex' element has no rows")
+    columns = {prop.name: i for i, prop in enumerate(vertex.properties)}
+    missing = [name for name in REQUIRED if name not in columns]
+    if missing:
+        raise SceneFormatError(f"{path}: missing vertex properties {', '.join(missing)}")
+    rest = sorted((name for name in columns if name.startswith("f_rest_")), key=_suffix)
+    if len(rest) not in _REST_COUNT_TO_DEGREE or [_suffix(n) for n in rest] != list(range(len(rest))):
+        raise SceneFormatError(
+            f"{path}: f_rest_* must be f_rest_0..f_rest_(n-1) with n in 0, 9, 24, 45; found {len(rest)}"
+        )
+    k = sh_coefficient_count(_REST_COUNT_TO_DEGREE[len(rest)])
+    # f_rest is channel-major: f_rest_{c*(K-1)+j} is basis j+1 of channel c.
+    sh_names = [[f"f_dc_{c}" for c in range(3)]]
+    sh_names += [[f"f_rest_{c * (k - 1) + j}" for c in range(3)] for j in range(k - 1)]
+    geometry = ["x", "y", "z", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3", "opacity"]
+    try:
+        # Two gathers, so that sh lands in its own contiguous array with no further copy.
+        values = _gather_float32(vertex, [columns[name] for name in geometry])
+        sh = _gather_float32(vertex, [columns[name] for row in sh_names for name in row])
+    except (ValueError, TypeError) as exc:
+        raise SceneFormatError(f"{path}: vertex properties are not numeric ({exc})") from None
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        scales = np.exp(values[:, 3:6])
+        quats = values[:, 6:10]
+        norms = np.linalg.norm(quats, axis=1, keepdims=True)
+        # Rows already unit to float32 rounding are kept as stored, so a saved file reloads bit-identical.
+        norms[np.abs(norms - 1) <= _UNIT_NORM_SLACK] = 1
+        quats = quats / np.maximum(norms, np.float32(1e-12))
+        opacities = 1.0 / (1.0 + np.exp(-values[:, 10]))
+    try:
+        return GaussianScene(values[:, 0:3], scales, quats, opacities, sh.reshape(len(sh), k, 3))
+    except SceneFormatError as exc:
+        raise SceneFormatError(f"{path}: {exc}") from None
+
+
+def write_ply(scene: GaussianScene, path: str | os.PathLike[str]) -> None:
+    """Write `scene` as a binary little-endian INRIA `.ply` with properties in the reference order.
+
+    Values are stored raw as 3DGS training stores them (log scale, logit opacity); opacities of
+    exactly 0 or 1 are moved 1e-7 inside so their logit stays finite.
+    """
+    n, k = len(scene), scene.sh.shape[1]
+    names = reference_property_names(scene.sh_degree)
+    table = np.zeros((n, len(names)), dtype=np.float32)
+    table[:, 0:3] = scene.means
+    table[:, 6:9] = scene.sh[:, 0]
+    # channel-major f_rest: (N, K-1, 3) -> (N, 3, K-1) -> flat
+    table[:, 9:9 + 3 * (k - 1)] = scene.sh[:, 1:].transpose(0, 2, 1).reshape(n, -1)
+    tail = 9 + 3 * (k - 1)
+    opacity = np.clip(scene.opacities.astype(np.float64), _OPACITY_EPS, 1 - _OPACITY_EPS)
+    table[:, tail] = np.log(opacity / (1 - opacity))
+    table[:, tail + 1:tail + 4] = np.log(scene.scales.astype(np.float64))
+    table[:, tail + 4:tail + 8] = scene.quats
+    records = table.view(np.dtype([(name, "<f4") for name in names])).reshape(n)
+    element = plyfile.PlyElement.describe(records, "vertex")
+    with atomic_open(path) as stream:
+        plyfile.PlyData([element], text=False, byte_order="<").write(stream)
+
+
+def _suffix(name: str) -> int:
+    match = re.fullmatch(r"f_rest_(\d+)", name)
+    return int(match.group(1)) if match else -1
+
+
+def _gather_float32(vertex: plyfile.PlyElement, columns: list[int]) -> np.ndarray:
+    """(N, len(columns)) float32 of the chosen properties, in one copy when all share a dtype."""
+    records = vertex.data
+    dtypes = {records.dtype[i] for i in range(len(records.dtype))}
+    if len(dtypes) == 1 and records.dtype.itemsize == len(records.dtype) * next(iter(dtypes)).itemsize:
+        table = records.view(next(iter(dtypes))).reshape(len(records), -1)
+        return np.ascontiguousarray(table[:, columns], dtype=np.float32)
+    names = records.dtype.names or ()
+    return np.stack([records[names[i]].astype(np.float32) for i in columns], axis=1)
+
+
+def _check_header(path: str | os.PathLike[str]) -> None:
+    """Refuse headers whose element counts cannot fit in the file, before plyfile allocates for them."""
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(_HEADER_LIMIT)
+            size = os.fstat(stream.fileno()).st_size
+    except OSError as exc:
+        raise SceneFormatError(f"{path}: cannot read ({exc.strerror})") from None
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        raise SceneFormatError(f"{path}: not a PLY file or header not terminated within {_HEADER_LIMIT} bytes")
+    body = size - end
+    ascii_format = b"format ascii" in head[:end]
+    for line in head[:end].splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == b"element":
+            try:
+                count = int(parts[2])
+            except ValueError:
+                raise SceneFormatError(f"{path}: element {parts[1]!r} has a non-integer count") from None
+            if count < 0:
+                raise SceneFormatError(f"{path}: element {parts[1].decode(errors='replace')} has negative count {count}")
+            # ASCII rows take at least 2 bytes ("0\n"), binary rows at least 1.
+            if count * (2 if ascii_format else 1) > body:
+                raise SceneFormatError(
+                    f"{path}: header claims {count} {parts[1].decode(errors='replace')} rows "
+                    f"but only {body} bytes follow it (truncated or corrupt)"
+                )

@@ -1,0 +1,137 @@
+"""The in-memory Gaussian scene: activated arrays, validated once on construction."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SceneFormatError
+
+# Unit quaternions are checked to this tolerance; loaders normalise before constructing.
+QUAT_NORM_TOLERANCE = 1e-3
+
+SH_C0 = 0.28209479177387814  # the degree-0 SH basis constant: rgb = 0.5 + SH_C0 * dc
+
+
+def sh_coefficient_count(degree: int) -> int:
+    """Number of SH coefficients per colour channel for `degree` (0..3): (degree + 1)^2."""
+    return (degree + 1) ** 2
+
+
+@dataclass(frozen=True, eq=False)
+class GaussianScene:
+    """A 3D Gaussian Splatting scene with activated values (see DESIGN.md, Conventions).
+
+    Attributes:
+        means: (N, 3) float32 centres in world units.
+        scales: (N, 3) float32 standard deviations along the local axes, linear and > 0.
+        quats: (N, 4) float32 unit rotations, w first.
+        opacities: (N,) float32 in [0, 1].
+        sh: (N, K, 3) float32 spherical-harmonic coefficients per RGB channel, K = (d + 1)^2;
+            sh[:, 0] is the DC term (rgb = 0.5 + SH_C0 * sh[:, 0]).
+
+    Arrays are stored C-contiguous float32; construction converts and validates them and raises
+    `SceneFormatError` naming the field and the first bad row.
+    """
+
+    means: np.ndarray
+    scales: np.ndarray
+    quats: np.ndarray
+    opacities: np.ndarray
+    sh: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = _as_rows(self, "means", 3)
+        _as_rows(self, "scales", 3, n)
+        _as_rows(self, "quats", 4, n)
+        opacities = _as_float32(self, "opacities")
+        if opacities.shape != (n,):
+            raise SceneFormatError(f"opacities: expected shape ({n},), got {opacities.shape}")
+        sh = _as_float32(self, "sh")
+        if sh.ndim != 3 or sh.shape[0] != n or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
+            raise SceneFormatError(f"sh: expected shape ({n}, K, 3) with K in 1, 4, 9, 16, got {sh.shape}")
+        for name in ("means", "scales", "quats", "opacities", "sh"):
+            _check_finite(name, getattr(self, name))
+        # Cheap whole-array checks first; row masks are built only to name a bad row.
+        if n and self.scales.min() <= 0:
+            _first_bad("scales", ~(self.scales > 0).all(axis=1), "scales must be > 0")
+        if n and (self.opacities.min() < 0 or self.opacities.max() > 1):
+            _first_bad("opacities", ~((self.opacities >= 0) & (self.opacities <= 1)), "opacity must be in [0, 1]")
+        squared = np.einsum("ij,ij->i", self.quats, self.quats)
+        if n and (squared.min() < (1 - QUAT_NORM_TOLERANCE) ** 2 or squared.max() > (1 + QUAT_NORM_TOLERANCE) ** 2):
+            norms = np.sqrt(squared)
+            _first_bad("quats", norms == 0, "zero quaternion")
+            _first_bad("quats", np.abs(norms - 1) > QUAT_NORM_TOLERANCE, "quaternion is not unit length")
+
+    def __len__(self) -> int:
+        return int(self.means.shape[0])
+
+    def __repr__(self) -> str:
+        return f"GaussianScene({len(self)} Gaussians, SH degree {self.sh_degree})"
+
+    @property
+    def sh_degree(self) -> int:
+        """Spherical-harmonic degree d (0..3)."""
+        return int(round(np.sqrt(self.sh.shape[1]))) - 1
+
+    @property
+    def colors(self) -> np.ndarray:
+        """(N, 3) float32 view-independent colour from the DC term, clipped to [0, 1]."""
+        return np.clip(0.5 + SH_C0 * self.sh[:, 0], 0.0, 1.0).astype(np.float32)
+
+    @classmethod
+    def from_colors(
+        cls,
+        means: np.ndarray,
+        scales: np.ndarray,
+        quats: np.ndarray,
+        opacities: np.ndarray,
+        colors: np.ndarray,
+    ) -> GaussianScene:
+        """Build a degree-0 scene from plain RGB colours (N, 3) in [0, 1]."""
+        dc = (np.asarray(colors, np.float32) - 0.5) / np.float32(SH_C0)
+        return cls(means, scales, quats, opacities, dc.reshape(-1, 1, 3))
+
+    def subset(self, rows: np.ndarray) -> GaussianScene:
+        """A new scene with only `rows` (indices or a boolean mask), in that order."""
+        return GaussianScene(
+            self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows]
+        )
+
+    def replace(self, **arrays: np.ndarray) -> GaussianScene:
+        """A new scene with some arrays replaced (the others are shared, not copied)."""
+        fields = {name: getattr(self, name) for name in ("means", "scales", "quats", "opacities", "sh")}
+        fields.update(arrays)
+        return GaussianScene(**fields)
+
+
+def _as_float32(scene: GaussianScene, name: str) -> np.ndarray:
+    value = getattr(scene, name)
+    try:
+        array = np.ascontiguousarray(value, dtype=np.float32)
+    except (TypeError, ValueError) as exc:
+        raise SceneFormatError(f"{name}: cannot convert to a float32 array ({exc})") from None
+    object.__setattr__(scene, name, array)  # frozen dataclass: normalise once, here
+    return array
+
+
+def _as_rows(scene: GaussianScene, name: str, width: int, n: int | None = None) -> int:
+    array = _as_float32(scene, name)
+    if array.ndim != 2 or array.shape[1] != width or (n is not None and array.shape[0] != n):
+        want = f"({'N' if n is None else n}, {width})"
+        raise SceneFormatError(f"{name}: expected shape {want}, got {array.shape}")
+    return int(array.shape[0])
+
+
+def _check_finite(name: str, array: np.ndarray) -> None:
+    # min/max propagate NaN and expose inf without allocating a boolean copy of the array
+    if array.size and not (np.isfinite(array.min()) and np.isfinite(array.max())):
+        bad = ~np.isfinite(array.reshape(array.shape[0], -1)).all(axis=1)
+        _first_bad(name, bad, "NaN or infinite value")
+
+
+def _first_bad(name: str, bad_rows: np.ndarray, what: str) -> None:
+    if bad_rows.any():
+        row = int(np.argmax(bad_rows))
+        raise SceneFormatError(f"{name}: {what} in row {row} ({int(bad_rows.sum())} bad rows)")

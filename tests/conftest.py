@@ -1,0 +1,32 @@
+"""Shared fixtures: small synthetic scenes and paths to the bundled test data."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sketchrodgs import GaussianScene
+
+DATA = Path(__file__).parent / "data"
+
+
+def random_scene(n: int, sh_degree: int = 0, seed: int = 0) -> GaussianScene:
+    """A scene of `n` random Gaussians with every field exercised."""
+    rng = np.random.default_rng(seed)
+    quats = rng.normal(size=(n, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    k = (sh_degree + 1) ** 2
+    return GaussianScene(
+        means=rng.normal(size=(n, 3)),
+        scales=np.exp(rng.uniform(-6, -1, size=(n, 3))),
+        quats=quats,
+        opacities=rng.uniform(0.01, 0.99, size=n),
+        sh=rng.normal(scale=0.5, size=(n, k, 3)),
+    )
+
+
+@pytest.fixture
+def data_dir() -> Path:
+    return DATA

@@ -1,0 +1,82 @@
+"""GaussianScene validation: the constructor is the one gate every array passes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import random_scene
+
+from sketchrodgs import GaussianScene, SceneFormatError
+
+
+def fields(n: int = 4) -> dict[str, np.ndarray]:
+    scene = random_scene(n)
+    return {name: getattr(scene, name).copy() for name in ("means", "scales", "quats", "opacities", "sh")}
+
+
+def test_arrays_are_float32_c_contiguous():
+    f = fields()
+    f["means"] = np.asfortranarray(f["means"].astype(np.float64))
+    scene = GaussianScene(**f)
+    assert scene.means.dtype == np.float32 and scene.means.flags.c_contiguous
+    assert len(scene) == 4 and scene.sh_degree == 0
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+def test_sh_degree_from_coefficients(degree):
+    assert random_scene(3, sh_degree=degree).sh_degree == degree
+
+
+@pytest.mark.parametrize(
+    "field, row, value, message",
+    [
+        ("means", 2, np.nan, "means: NaN or infinite value in row 2"),
+        ("scales", 1, 0.0, "scales: scales must be > 0 in row 1"),
+        ("scales", 3, -1.0, "scales must be > 0 in row 3"),
+        ("opacities", 0, 1.5, "opacity must be in [0, 1] in row 0"),
+        ("sh", 1, np.inf, "sh: NaN or infinite value in row 1"),
+    ],
+)
+def test_bad_values_name_field_and_first_row(field, row, value, message):
+    f = fields()
+    f[field][row] = value
+    with pytest.raises(SceneFormatError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        GaussianScene(**f)
+
+
+def test_zero_and_non_unit_quaternions_are_errors():
+    f = fields()
+    f["quats"][1] = 0
+    with pytest.raises(SceneFormatError, match="quats: zero quaternion in row 1"):
+        GaussianScene(**f)
+    f = fields()
+    f["quats"][2] *= 2
+    with pytest.raises(SceneFormatError, match="quats: quaternion is not unit length in row 2"):
+        GaussianScene(**f)
+
+
+@pytest.mark.parametrize(
+    "field, shape",
+    [("means", (4, 2)), ("scales", (3, 3)), ("quats", (4, 3)), ("opacities", (4, 1)), ("sh", (4, 2, 3))],
+)
+def test_wrong_shapes_are_named(field, shape):
+    f = fields()
+    f[field] = np.ones(shape, np.float32)
+    with pytest.raises(SceneFormatError, match=f"^{field}: expected shape"):
+        GaussianScene(**f)
+
+
+def test_subset_and_replace_make_new_scenes():
+    scene = random_scene(10)
+    part = scene.subset(np.arange(10) % 2 == 0)
+    assert len(part) == 5
+    np.testing.assert_array_equal(part.means, scene.means[::2])
+    moved = scene.replace(means=scene.means + 1)
+    np.testing.assert_array_equal(moved.means, scene.means + 1)
+    assert moved.scales is scene.scales
+
+
+def test_from_colors_round_trips_the_dc_colour():
+    scene = random_scene(5)
+    again = GaussianScene.from_colors(scene.means, scene.scales, scene.quats, scene.opacities, scene.colors)
+    np.testing.assert_allclose(again.colors, scene.colors, atol=1e-6)
