@@ -1,0 +1,66 @@
+//! The band of pixels around the stroke, each labelled with its nearest depth-compatible stroke
+//! segment (DESIGN.md, path search step 2).
+
+use crate::IndexImage;
+use crate::stroke::CleanStroke;
+
+/// Per-pixel labels; only object pixels (`K != -1`) inside the band are labelled.
+pub(crate) struct Band {
+    /// Stroke segment of each pixel, -1 outside the band.
+    pub segment: Vec<i32>,
+    /// Parameter along that segment, in [0, 1].
+    pub t: Vec<f32>,
+    /// Distance in pixels from the pixel centre to that segment.
+    pub distance: Vec<f32>,
+}
+
+impl Band {
+    pub fn contains(&self, p: usize) -> bool {
+        self.segment[p] >= 0
+    }
+
+    /// Progress along the stroke: segment index plus the parameter on it.
+    pub fn progress(&self, p: usize) -> f32 {
+        self.segment[p] as f32 + self.t[p]
+    }
+}
+
+/// Label each object pixel within `band_px` of the stroke with its nearest segment among those whose
+/// depth is within `depth_gap` of the pixel's `Z`. Each segment scans only its own bounding box.
+pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32, depth_gap: f32) -> Band {
+    let n = image.width * image.height;
+    let mut band = Band { segment: vec![-1; n], t: vec![0.0; n], distance: vec![f32::INFINITY; n] };
+    for i in 0..stroke.segment_count() {
+        let (a, b) = (stroke.points[i], stroke.points[i + 1]);
+        let segment_depth = stroke.segment_depth(i);
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let length2 = ab[0] * ab[0] + ab[1] * ab[1];
+        let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
+        let (x0, x1) = (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
+        let (y0, y1) = (clip(a[1].min(b[1]) - band_px - 1.0, image.height), clip(a[1].max(b[1]) + band_px + 1.0, image.height));
+        for row in y0..=y1 {
+            for col in x0..=x1 {
+                let p = row * image.width + col;
+                if image.index[p] < 0 {
+                    continue;
+                }
+                if let Some(z) = segment_depth
+                    && (image.depth[p] - z).abs() > depth_gap
+                {
+                    continue;
+                }
+                let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
+                let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
+                let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
+                let d = (dx * dx + dy * dy).sqrt();
+                // strict: at a shared vertex the earlier segment keeps the pixel
+                if d <= band_px && d < band.distance[p] {
+                    band.segment[p] = i as i32;
+                    band.t[p] = t;
+                    band.distance[p] = d;
+                }
+            }
+        }
+    }
+    band
+}

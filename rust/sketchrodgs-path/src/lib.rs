@@ -1,0 +1,127 @@
+//! Screen-space path search of SketchRodGS (paper: "Path Optimization", "Occlusion").
+//!
+//! Given the per-pixel index image `K` (which Gaussian contributes most to each pixel), its depth
+//! image `Z`, the Gaussian centres and a user stroke, find the pixel path that follows the stroke
+//! while minimising the 3D length of the chain of Gaussians it crosses (paper Eq. 1). Depth gaps
+//! larger than `3R` are never crossed; where that cuts the path, the search resumes further along
+//! the stroke (occlusion handling). DESIGN.md, "Path search", is the specification.
+//!
+//! ```
+//! use sketchrodgs_path::{IndexImage, TraceParams, trace_stroke};
+//! // A 1-pixel-high image: Gaussians 0..8 in a row, one per pixel, 1 unit apart.
+//! let index: Vec<i32> = (0..8).collect();
+//! let depth = vec![5.0_f32; 8];
+//! let centres: Vec<[f32; 3]> = (0..8).map(|i| [i as f32, 0.0, 5.0]).collect();
+//! let image = IndexImage::new(8, 1, &index, &depth).unwrap();
+//! let stroke = [[0.5_f32, 0.5], [7.5, 0.5]];
+//! let params = TraceParams { radius: 1.0, ..TraceParams::default() };
+//! let trace = trace_stroke(&image, &centres, &stroke, &params).unwrap();
+//! assert_eq!(trace.pieces[0].gaussian_ids, (0..8).collect::<Vec<u32>>());
+//! ```
+
+mod band;
+mod search;
+mod stroke;
+
+pub use search::{Piece, PieceEnd, Trace, trace_stroke};
+
+/// Things that make a trace impossible. Each names what was wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PathError {
+    #[error("index image is {width}x{height} but has {index} index and {depth} depth values")]
+    ImageSize { width: usize, height: usize, index: usize, depth: usize },
+    #[error("index image refers to Gaussian {id} but there are only {count} centres")]
+    IndexOutOfRange { id: i32, count: usize },
+    #[error("stroke vertex {vertex} has a non-finite coordinate")]
+    NonFiniteStroke { vertex: usize },
+    #[error("stroke needs at least 2 points inside the {width}x{height} image, got {inside}")]
+    StrokeTooShort { inside: usize, width: usize, height: usize },
+    #[error("stroke lies entirely on background (no Gaussian under any of its points)")]
+    StrokeOnBackground,
+    #[error("the stroke's {which} point ({x:.1}, {y:.1}) is not on the object (nothing within {band_px:.1} px)")]
+    EndpointOffObject { which: &'static str, x: f32, y: f32, band_px: f32 },
+    #[error("parameter {name} must be finite and > 0, got {value}")]
+    BadParameter { name: &'static str, value: f64 },
+}
+
+/// The rendered index image `K` and its depth `Z` (row-major, `[row * width + col]`).
+#[derive(Debug, Clone, Copy)]
+pub struct IndexImage<'a> {
+    pub width: usize,
+    pub height: usize,
+    /// Gaussian with the largest blending weight at each pixel, -1 where none.
+    pub index: &'a [i32],
+    /// Camera z of that Gaussian.
+    pub depth: &'a [f32],
+}
+
+impl<'a> IndexImage<'a> {
+    /// Wrap the buffers, checking their sizes.
+    pub fn new(width: usize, height: usize, index: &'a [i32], depth: &'a [f32]) -> Result<Self, PathError> {
+        let pixels = width.checked_mul(height);
+        if width == 0 || height == 0 || pixels != Some(index.len()) || pixels != Some(depth.len()) {
+            return Err(PathError::ImageSize { width, height, index: index.len(), depth: depth.len() });
+        }
+        Ok(Self { width, height, index, depth })
+    }
+
+    /// Gaussian at pixel `p` (flat index), if any.
+    #[inline]
+    pub(crate) fn gaussian(&self, p: usize) -> Option<u32> {
+        u32::try_from(self.index[p]).ok()
+    }
+
+    /// Flat pixel index of continuous coordinates, if inside the image.
+    #[inline]
+    pub(crate) fn pixel_at(&self, x: f32, y: f32) -> Option<usize> {
+        if x >= 0.0 && y >= 0.0 && (x as usize) < self.width && (y as usize) < self.height {
+            Some(y as usize * self.width + x as usize)
+        } else {
+            None
+        }
+    }
+}
+
+/// Parameters of the search. Symbols are the paper's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceParams {
+    /// `R`: radius of the slender object in world units. Depth gaps over `3R` are not crossed.
+    pub radius: f32,
+    /// `alpha`: weight of the squared distance to the stroke in Eq. 1. Default 1.
+    pub stroke_weight: f64,
+    /// `b`: half-width in pixels of the band around the stroke that the path may use.
+    /// Default: 1 % of the image width (use [`TraceParams::default_band_px`]); 0 here means that.
+    pub band_px: f32,
+    /// A stroke vertex this close (pixels) to a path found so far counts as covered. Default 10.
+    pub cover_px: f32,
+}
+
+impl Default for TraceParams {
+    fn default() -> Self {
+        Self { radius: 0.01, stroke_weight: 1.0, band_px: 0.0, cover_px: 10.0 }
+    }
+}
+
+impl TraceParams {
+    /// The default band half-width for an image `width` pixels wide: 1 % of the width, at least 2 px.
+    pub fn default_band_px(width: usize) -> f32 {
+        (0.01 * width as f32).max(2.0)
+    }
+
+    fn validated(&self, width: usize) -> Result<Self, PathError> {
+        let check = |name: &'static str, value: f64| {
+            if value.is_finite() && value > 0.0 { Ok(()) } else { Err(PathError::BadParameter { name, value }) }
+        };
+        check("radius", f64::from(self.radius))?;
+        check("cover_px", f64::from(self.cover_px))?;
+        if !(self.stroke_weight.is_finite() && self.stroke_weight >= 0.0) {
+            return Err(PathError::BadParameter { name: "stroke_weight", value: self.stroke_weight });
+        }
+        let band_px = if self.band_px == 0.0 { Self::default_band_px(width) } else { self.band_px };
+        check("band_px", f64::from(band_px))?;
+        Ok(Self { band_px, ..*self })
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,176 @@
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use crate::*;
+
+/// A synthetic scene: one Gaussian per covered pixel, its centre the pixel back-projected at depth
+/// `z` with focal length `focal` (so neighbouring pixels on one surface are `z / focal` apart).
+struct Synthetic {
+    width: usize,
+    height: usize,
+    index: Vec<i32>,
+    depth: Vec<f32>,
+    centres: Vec<[f32; 3]>,
+}
+
+impl Synthetic {
+    fn new(width: usize, height: usize, focal: f32, surface: impl Fn(usize, usize) -> Option<f32>) -> Self {
+        let (mut index, mut depth, mut centres) = (vec![-1; width * height], vec![0.0; width * height], Vec::new());
+        for row in 0..height {
+            for col in 0..width {
+                if let Some(z) = surface(col, row) {
+                    let p = row * width + col;
+                    index[p] = centres.len() as i32;
+                    depth[p] = z;
+                    centres.push([(col as f32 + 0.5) * z / focal, (row as f32 + 0.5) * z / focal, z]);
+                }
+            }
+        }
+        Self { width, height, index, depth, centres }
+    }
+
+    fn image(&self) -> IndexImage<'_> {
+        IndexImage::new(self.width, self.height, &self.index, &self.depth).unwrap()
+    }
+
+    fn trace(&self, stroke: &[[f32; 2]], radius: f32) -> Result<Trace, PathError> {
+        let params = TraceParams { radius, band_px: 6.0, ..TraceParams::default() };
+        trace_stroke(&self.image(), &self.centres, stroke, &params)
+    }
+
+    fn rows_of(&self, piece: &Piece) -> Vec<u32> {
+        piece.pixels.iter().map(|p| p[1]).collect()
+    }
+}
+
+const FOCAL: f32 = 100.0;
+
+/// A horizontal rope 3 px thick at rows 19..=21, depth 5.
+fn rope(_col: usize, row: usize) -> Option<f32> {
+    (19..=21).contains(&row).then_some(5.0)
+}
+
+#[test]
+fn straight_rope_is_followed_end_to_end() {
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let trace = scene.trace(&[[2.5, 20.5], [40.0, 21.5], [77.5, 20.5]], 0.05).unwrap();
+    assert_eq!(trace.pieces.len(), 1);
+    let piece = &trace.pieces[0];
+    assert_eq!(piece.end, PieceEnd::Goal);
+    assert_eq!(piece.pixels.first(), Some(&[2, 20]));
+    assert_eq!(piece.pixels.last(), Some(&[77, 20]));
+    assert!(scene.rows_of(piece).iter().all(|r| (19..=21).contains(r)));
+    // 8-connected and monotone in x: the shortest 3D path does not wander
+    for w in piece.pixels.windows(2) {
+        assert!(w[1][0] == w[0][0] + 1 && w[1][1].abs_diff(w[0][1]) <= 1, "{w:?}");
+    }
+    assert_eq!(piece.gaussian_ids.len(), piece.pixels.len());
+    assert!(trace.coverage > 0.99, "coverage {}", trace.coverage);
+}
+
+#[test]
+fn the_path_prefers_the_surface_nearest_the_stroke() {
+    // Two ropes 8 px apart at the same depth; the stroke runs on the lower one.
+    let scene = Synthetic::new(60, 40, FOCAL, |_, row| ((10..=12).contains(&row) || (20..=22).contains(&row)).then_some(5.0));
+    let trace = scene.trace(&[[1.5, 21.5], [58.5, 20.5]], 0.05).unwrap();
+    assert!(scene.rows_of(&trace.pieces[0]).iter().all(|r| (20..=22).contains(r)));
+}
+
+#[test]
+fn an_occluding_pole_splits_the_path_and_it_resumes_behind() {
+    // A rope at depth 5 passes behind a vertical pole (cols 38..=42) at depth 3.
+    let scene = Synthetic::new(80, 40, FOCAL, |col, row| if (38..=42).contains(&col) { Some(3.0) } else { rope(col, row) });
+    let trace = scene.trace(&[[2.5, 20.5], [20.5, 20.5], [40.5, 20.5], [60.5, 20.5], [77.5, 20.5]], 0.05).unwrap();
+    assert_eq!(trace.pieces.len(), 2, "{:?}", trace.pieces.iter().map(|p| p.end).collect::<Vec<_>>());
+    let (first, second) = (&trace.pieces[0], &trace.pieces[1]);
+    assert!(matches!(first.end, PieceEnd::Lost { pixel, .. } if pixel[0] == 37), "{:?}", first.end);
+    assert_eq!(second.end, PieceEnd::Goal);
+    // neither piece uses a pole Gaussian
+    for piece in &trace.pieces {
+        assert!(piece.pixels.iter().all(|p| !(38..=42).contains(&p[0])));
+    }
+    // the stroke vertex over the pole was dropped by clean-up (it jumped onto the occluder)
+    assert_eq!(trace.clean_stroke.len(), 4);
+    assert!(trace.coverage > 0.95, "coverage {}", trace.coverage);
+}
+
+#[test]
+fn the_path_does_not_jump_across_a_depth_gap_onto_an_occluder() {
+    // Same pole, but a stroke whose straight line would be cheapest across it.
+    let scene = Synthetic::new(80, 40, FOCAL, |col, row| if (38..=42).contains(&col) { Some(3.0) } else { rope(col, row) });
+    let trace = scene.trace(&[[2.5, 20.5], [77.5, 20.5]], 0.05).unwrap();
+    let ids: Vec<u32> = trace.pieces.iter().flat_map(|p| p.gaussian_ids.iter().copied()).collect();
+    assert!(ids.iter().all(|&k| scene.centres[k as usize][2] == 5.0));
+    assert_eq!(trace.pieces.last().unwrap().end, PieceEnd::Goal);
+}
+
+#[test]
+fn forward_only_keeps_the_path_on_its_branch_at_a_crossing() {
+    // A stroke that goes right along row 20, then comes back left along row 30 (a hairpin). Without
+    // the forward-only rule the path could cut straight to the goal along the bottom strand.
+    let scene = Synthetic::new(80, 50, FOCAL, |col, row| {
+        ((19..=21).contains(&row) && col >= 5 || (29..=31).contains(&row) && col >= 5 || (70..=74).contains(&col) && (19..=31).contains(&row))
+            .then_some(5.0)
+    });
+    let trace = scene.trace(&[[6.5, 20.5], [72.5, 20.5], [72.5, 30.5], [6.5, 30.5]], 0.05).unwrap();
+    assert_eq!(trace.pieces.len(), 1);
+    let piece = &trace.pieces[0];
+    assert!(piece.pixels.iter().any(|p| p[0] >= 70), "the path must go round the hairpin");
+    assert_eq!(piece.end, PieceEnd::Goal);
+}
+
+#[test]
+fn endpoints_a_few_pixels_off_the_object_snap_onto_it() {
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let trace = scene.trace(&[[2.5, 15.5], [77.5, 24.5]], 0.05).unwrap();
+    let piece = &trace.pieces[0];
+    assert_eq!(piece.end, PieceEnd::Goal);
+    assert_eq!(piece.pixels.first().unwrap()[1], 19);
+    assert_eq!(piece.pixels.last().unwrap()[1], 21);
+}
+
+#[test]
+fn endpoint_far_from_the_object_is_a_clear_error() {
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let err = scene.trace(&[[2.5, 20.5], [77.5, 2.5]], 0.05).unwrap_err();
+    assert!(matches!(err, PathError::EndpointOffObject { which: "last", .. }), "{err}");
+    assert!(err.to_string().contains("last point"));
+}
+
+#[test]
+fn bad_strokes_and_parameters_are_errors() {
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let nan = scene.trace(&[[2.5, 20.5], [f32::NAN, 20.5]], 0.05).unwrap_err();
+    assert_eq!(nan, PathError::NonFiniteStroke { vertex: 1 });
+    let short = scene.trace(&[[2.5, 20.5]], 0.05).unwrap_err();
+    assert!(matches!(short, PathError::StrokeTooShort { inside: 1, .. }));
+    let outside = scene.trace(&[[-5.0, 20.5], [100.0, 20.5]], 0.05).unwrap_err();
+    assert!(matches!(outside, PathError::StrokeTooShort { inside: 0, .. }));
+    let background = scene.trace(&[[2.5, 2.5], [77.5, 2.5]], 0.05).unwrap_err();
+    assert_eq!(background, PathError::StrokeOnBackground);
+    for radius in [0.0, -1.0, f32::NAN] {
+        assert!(matches!(scene.trace(&[[2.5, 20.5], [77.5, 20.5]], radius), Err(PathError::BadParameter { name: "radius", .. })));
+    }
+}
+
+#[test]
+fn malformed_images_are_errors() {
+    assert!(matches!(IndexImage::new(4, 4, &[0; 15], &[0.0; 16]), Err(PathError::ImageSize { .. })));
+    assert!(matches!(IndexImage::new(0, 4, &[], &[]), Err(PathError::ImageSize { .. })));
+    let index = [0, 1, 7, 2];
+    let image = IndexImage::new(4, 1, &index, &[1.0; 4]).unwrap();
+    let err = trace_stroke(&image, &[[0.0; 3]; 3], &[[0.5, 0.5], [3.5, 0.5]], &TraceParams::default()).unwrap_err();
+    assert_eq!(err, PathError::IndexOutOfRange { id: 7, count: 3 });
+}
+
+#[test]
+fn a_stroke_wandering_off_the_object_mid_way_still_covers_the_object() {
+    // The stroke bows 15 px above the rope in the middle, beyond the band: the path is lost there and
+    // resumes where the stroke comes back.
+    let scene = Synthetic::new(100, 50, FOCAL, |_, row| (29..=31).contains(&row).then_some(5.0));
+    let stroke = [[2.5, 30.5], [30.5, 30.5], [45.5, 15.5], [55.5, 15.5], [70.5, 30.5], [97.5, 30.5]];
+    let trace = scene.trace(&stroke, 0.05).unwrap();
+    assert_eq!(trace.pieces.last().unwrap().end, PieceEnd::Goal);
+    assert!(trace.pieces.len() >= 2);
+    let cols: Vec<u32> = trace.pieces.iter().flat_map(|p| p.pixels.iter().map(|q| q[0])).collect();
+    assert!(cols.iter().any(|&c| c < 30) && cols.iter().any(|&c| c > 70));
+}
