@@ -6,7 +6,9 @@ The public API lives here; see README.md for a tour.
 
 from __future__ import annotations
 
-from . import data
+import os
+
+from . import _core, data
 from ._core import __version__
 from .camera import Camera, load_cameras
 from .errors import (
@@ -16,20 +18,29 @@ from .errors import (
     SimulationError,
     SketchRodGSError,
 )
+from .extract import Extraction, extract_rod
 from .io import load_scene, save_scene
+from .render import RenderResult, render
 from .scene import GaussianScene
+
+# A forked child has none of the worker threads of the parent's pool; it builds its own.
+os.register_at_fork(after_in_child=_core._reset_pool_after_fork)
 
 __all__ = [
     "Camera",
     "CameraError",
+    "Extraction",
     "GaussianScene",
     "PathNotFoundError",
+    "RenderResult",
     "SceneFormatError",
     "SimulationError",
     "SketchRodGSError",
     "__version__",
     "data",
+    "extract_rod",
     "load_cameras",
     "load_scene",
+    "render",
     "save_scene",
 ]

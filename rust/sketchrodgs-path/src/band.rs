@@ -1,13 +1,20 @@
 //! The band of pixels around the stroke, each labelled with its nearest depth-compatible stroke
-//! segment (DESIGN.md, path search step 2).
+//! segment (DESIGN.md, path search step 2). Band pixels become the nodes of the search graph.
 
 use crate::IndexImage;
 use crate::stroke::CleanStroke;
 
-/// Per-pixel labels; only object pixels (`K != -1`) inside the band are labelled.
+/// No node at this pixel.
+pub(crate) const NO_NODE: u32 = u32::MAX;
+
+/// The labelled band, stored per node (band pixel) so the search touches only band memory.
 pub(crate) struct Band {
-    /// Stroke segment of each pixel, -1 outside the band.
-    pub segment: Vec<i32>,
+    /// Node of each pixel (`NO_NODE` outside the band); the only image-sized array.
+    pub node_of_pixel: Vec<u32>,
+    /// Pixel (flat index) of each node.
+    pub pixel: Vec<u32>,
+    /// Stroke segment of each node.
+    pub segment: Vec<u32>,
     /// Parameter along that segment, in [0, 1].
     pub t: Vec<f32>,
     /// Distance in pixels from the pixel centre to that segment.
@@ -15,21 +22,31 @@ pub(crate) struct Band {
 }
 
 impl Band {
-    pub fn contains(&self, p: usize) -> bool {
-        self.segment[p] >= 0
+    pub fn node(&self, pixel: usize) -> Option<usize> {
+        let node = self.node_of_pixel[pixel];
+        (node != NO_NODE).then_some(node as usize)
     }
 
     /// Progress along the stroke: segment index plus the parameter on it.
-    pub fn progress(&self, p: usize) -> f32 {
-        self.segment[p] as f32 + self.t[p]
+    pub fn progress(&self, node: usize) -> f32 {
+        self.segment[node] as f32 + self.t[node]
+    }
+
+    pub fn len(&self) -> usize {
+        self.pixel.len()
     }
 }
 
 /// Label each object pixel within `band_px` of the stroke with its nearest segment among those whose
 /// depth is within `depth_gap` of the pixel's `Z`. Each segment scans only its own bounding box.
 pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32, depth_gap: f32) -> Band {
-    let n = image.width * image.height;
-    let mut band = Band { segment: vec![-1; n], t: vec![0.0; n], distance: vec![f32::INFINITY; n] };
+    let mut band = Band {
+        node_of_pixel: vec![NO_NODE; image.width * image.height],
+        pixel: Vec::new(),
+        segment: Vec::new(),
+        t: Vec::new(),
+        distance: Vec::new(),
+    };
     for i in 0..stroke.segment_count() {
         let (a, b) = (stroke.points[i], stroke.points[i + 1]);
         let segment_depth = stroke.segment_depth(i);
@@ -53,11 +70,25 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
                 let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
                 let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
                 let d = (dx * dx + dy * dy).sqrt();
-                // strict: at a shared vertex the earlier segment keeps the pixel
-                if d <= band_px && d < band.distance[p] {
-                    band.segment[p] = i as i32;
-                    band.t[p] = t;
-                    band.distance[p] = d;
+                if d > band_px {
+                    continue;
+                }
+                match band.node_of_pixel[p] {
+                    NO_NODE => {
+                        band.node_of_pixel[p] = band.pixel.len() as u32;
+                        band.pixel.push(p as u32);
+                        band.segment.push(i as u32);
+                        band.t.push(t);
+                        band.distance.push(d);
+                    }
+                    // strict: at a shared vertex the earlier segment keeps the pixel
+                    node if d < band.distance[node as usize] => {
+                        let node = node as usize;
+                        band.segment[node] = i as u32;
+                        band.t[node] = t;
+                        band.distance[node] = d;
+                    }
+                    _ => {}
                 }
             }
         }

@@ -70,13 +70,13 @@ pub fn trace_stroke(
     let mut covered = CoverMask::new(image.width, image.height, params.cover_px);
     let mut pieces = Vec::new();
     loop {
-        let (end_pixel, reached) = search.run(start, goal);
-        let pixels = search.path_to(end_pixel);
+        let (end_node, reached) = search.run(start, goal);
+        let pixels = search.path_to(end_node);
         covered.stamp(&pixels);
         let end = if reached {
             PieceEnd::Goal
         } else {
-            PieceEnd::Lost { pixel: pixel_xy(image, end_pixel), progress: band.progress(end_pixel) }
+            PieceEnd::Lost { pixel: pixel_xy(image, band.pixel[end_node] as usize), progress: band.progress(end_node) }
         };
         pieces.push(Piece {
             gaussian_ids: distinct_ids(image, &pixels),
@@ -86,7 +86,7 @@ pub fn trace_stroke(
         if reached {
             break;
         }
-        match resume_point(image, &band, &clean, &covered, end_pixel, gap, params.band_px) {
+        match resume_point(image, &band, &clean, &covered, end_node, gap, params.band_px) {
             Some(next) => start = next,
             None => break,
         }
@@ -95,7 +95,7 @@ pub fn trace_stroke(
     Ok(Trace { pieces, clean_stroke: clean.points, coverage })
 }
 
-/// The nearest band pixel within `radius` of `point`.
+/// The node of the nearest band pixel within `radius` of `point`.
 fn snap(image: &IndexImage, band: &Band, point: [f32; 2], radius: f32) -> Option<usize> {
     let reach = radius.ceil() as i64 + 1;
     let (cx, cy) = (point[0].floor() as i64, point[1].floor() as i64);
@@ -105,8 +105,11 @@ fn snap(image: &IndexImage, band: &Band, point: [f32; 2], radius: f32) -> Option
             let p = row as usize * image.width + col as usize;
             let (dx, dy) = (col as f32 + 0.5 - point[0], row as f32 + 0.5 - point[1]);
             let d = (dx * dx + dy * dy).sqrt();
-            if band.contains(p) && d <= radius.max(0.75) && best.is_none_or(|(bd, _)| d < bd) {
-                best = Some((d, p));
+            if let Some(node) = band.node(p)
+                && d <= radius.max(0.75)
+                && best.is_none_or(|(bd, _)| d < bd)
+            {
+                best = Some((d, node));
             }
         }
     }
@@ -125,11 +128,13 @@ fn resume_point(
     band_px: f32,
 ) -> Option<usize> {
     let progress = band.progress(lost);
-    let lost_depth = image.depth[lost];
+    let (lost_depth, lost_arc) = (image.depth[band.pixel[lost] as usize], stroke.arc_at(progress));
+    // carry the lost depth along the stroke by the object's depth trend, as clean-up does
+    let slope = stroke.slope_before(lost_arc);
     (0..stroke.points.len())
         .filter(|&j| j as f32 > progress)
         .filter(|&j| !covered.contains(stroke.points[j]))
-        .filter(|&j| stroke.depth[j].is_some_and(|z| (z - lost_depth).abs() <= gap))
+        .filter(|&j| stroke.depth[j].is_some_and(|z| (z - lost_depth - slope * (stroke.arc[j] - lost_arc)).abs() <= gap))
         .find_map(|j| snap(image, band, stroke.points[j], band_px))
 }
 
@@ -160,38 +165,40 @@ impl Ord for Cost {
 const NONE: u32 = u32::MAX;
 const NEIGHBOURS: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
 
-/// Dijkstra state, reused across the pieces of one trace.
+/// Dijkstra state over the band's nodes, reused across the pieces of one trace.
 struct Search<'a> {
     image: &'a IndexImage<'a>,
-    centres: &'a [[f32; 3]],
     band: &'a Band,
     params: &'a TraceParams,
+    /// Centre of the Gaussian under each node, in f64 for the cost sums.
+    centre: Vec<[f64; 3]>,
     cost: Vec<f64>,
     previous: Vec<u32>,
     touched: Vec<usize>,
 }
 
 impl<'a> Search<'a> {
-    fn new(image: &'a IndexImage<'a>, centres: &'a [[f32; 3]], band: &'a Band, params: &'a TraceParams) -> Self {
-        let n = image.width * image.height;
-        Self { image, centres, band, params, cost: vec![f64::INFINITY; n], previous: vec![NONE; n], touched: Vec::new() }
+    fn new(image: &'a IndexImage<'a>, centres: &[[f32; 3]], band: &'a Band, params: &'a TraceParams) -> Self {
+        let centre = band
+            .pixel
+            .iter()
+            .map(|&p| centres[image.index[p as usize] as usize].map(f64::from))
+            .collect();
+        let n = band.len();
+        Self { image, band, params, centre, cost: vec![f64::INFINITY; n], previous: vec![NONE; n], touched: Vec::new() }
     }
 
-    fn centre(&self, p: usize) -> [f64; 3] {
-        let c = self.centres[self.image.index[p] as usize];
-        [f64::from(c[0]), f64::from(c[1]), f64::from(c[2])]
-    }
-
-    /// Shortest paths from `start`. Returns the goal if reached, else the settled pixel of furthest
-    /// progress along the stroke (the cheapest one among equals), and whether the goal was reached.
+    /// Shortest paths from node `start`. Returns the goal if reached, else the settled node of
+    /// furthest progress along the stroke (the cheapest one among equals), and whether the goal was
+    /// reached.
     fn run(&mut self, start: usize, goal: usize) -> (usize, bool) {
-        for &p in &self.touched {
-            self.cost[p] = f64::INFINITY;
-            self.previous[p] = NONE;
+        for &node in &self.touched {
+            self.cost[node] = f64::INFINITY;
+            self.previous[node] = NONE;
         }
         self.touched.clear();
         let (width, height) = (self.image.width as i64, self.image.height as i64);
-        let max_jump = 3.0 * f64::from(self.params.radius);
+        let max_jump2 = (3.0 * f64::from(self.params.radius)).powi(2);
         let half_width = self.image.width as f64 / 2.0;
         let mut heap = BinaryHeap::new();
         self.cost[start] = 0.0;
@@ -209,25 +216,26 @@ impl<'a> Search<'a> {
             if progress > furthest.1 {
                 furthest = (a, progress);
             }
-            let (col, row) = ((a % self.image.width) as i64, (a / self.image.width) as i64);
-            let (ca, segment_a) = (self.centre(a), self.band.segment[a]);
+            let pixel = self.band.pixel[a] as usize;
+            let (col, row) = ((pixel % self.image.width) as i64, (pixel / self.image.width) as i64);
+            let (ca, segment_a) = (self.centre[a], self.band.segment[a]);
             for (dx, dy) in NEIGHBOURS {
                 let (x, y) = (col + dx, row + dy);
                 if x < 0 || y < 0 || x >= width || y >= height {
                     continue;
                 }
-                let b = (y * width + x) as usize;
+                let Some(b) = self.band.node((y * width + x) as usize) else { continue };
                 // forward only along the stroke, which keeps the path on its branch at crossings
-                if !self.band.contains(b) || self.band.segment[b] < segment_a {
+                if self.band.segment[b] < segment_a {
                     continue;
                 }
-                let cb = self.centre(b);
-                let length = ((ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2)).sqrt();
-                if length > max_jump {
+                let cb = self.centre[b];
+                let length2 = (ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2);
+                if length2 > max_jump2 {
                     continue; // a depth gap: never jump onto another surface
                 }
                 let deviation = f64::from(self.band.distance[b]) / half_width;
-                let next = cost + length + self.params.stroke_weight * deviation * deviation;
+                let next = cost + length2.sqrt() + self.params.stroke_weight * deviation * deviation;
                 if next < self.cost[b] {
                     if self.cost[b].is_infinite() {
                         self.touched.push(b);
@@ -241,13 +249,13 @@ impl<'a> Search<'a> {
         (furthest.0, false)
     }
 
-    /// Pixels from the last run's start to `end`.
+    /// Pixels from the last run's start to node `end`.
     fn path_to(&self, end: usize) -> Vec<usize> {
-        let mut path = vec![end];
-        let mut p = end;
-        while self.previous[p] != NONE {
-            p = self.previous[p] as usize;
-            path.push(p);
+        let mut path = vec![self.band.pixel[end] as usize];
+        let mut node = end;
+        while self.previous[node] != NONE {
+            node = self.previous[node] as usize;
+            path.push(self.band.pixel[node] as usize);
         }
         path.reverse();
         path

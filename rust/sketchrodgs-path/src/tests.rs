@@ -174,3 +174,20 @@ fn a_stroke_wandering_off_the_object_mid_way_still_covers_the_object() {
     let cols: Vec<u32> = trace.pieces.iter().flat_map(|p| p.pixels.iter().map(|q| q[0])).collect();
     assert!(cols.iter().any(|&c| c < 30) && cols.iter().any(|&c| c > 70));
 }
+
+#[test]
+fn a_receding_rope_resumes_behind_a_wide_occluder() {
+    // The rope's depth grows 0.01 per pixel; across the 30 px pole it changes by 0.3 > 3R = 0.15,
+    // so only the depth trend tells the rope beyond the pole from something else.
+    let scene = Synthetic::new(120, 40, FOCAL, |col, row| {
+        if (45..=74).contains(&col) { Some(3.0) } else { (19..=21).contains(&row).then_some(5.0 + 0.01 * col as f32) }
+    });
+    let stroke: Vec<[f32; 2]> = (0..=23).map(|i| [2.5 + 5.0 * i as f32, 20.5]).collect();
+    let trace = scene.trace(&stroke, 0.05).unwrap();
+    assert_eq!(trace.pieces.len(), 2, "{:?}", trace.pieces.iter().map(|p| p.end).collect::<Vec<_>>());
+    assert_eq!(trace.pieces[1].end, PieceEnd::Goal);
+    assert!(trace.pieces[1].pixels[0][0] >= 75);
+    // the vertices over the pole were dropped, the ones beyond it kept
+    assert!(trace.clean_stroke.iter().all(|p| !(45.0..75.0).contains(&p[0])));
+    assert!(trace.clean_stroke.iter().any(|p| p[0] > 75.0));
+}

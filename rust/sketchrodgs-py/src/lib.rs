@@ -5,7 +5,11 @@
 
 use pyo3::prelude::*;
 
+mod arrays;
 mod errors;
+mod path;
+mod polyline;
+mod pool;
 mod raster;
 mod rod;
 
@@ -13,6 +17,9 @@ mod rod;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    path::register(m)?;
+    polyline::register(m)?;
+    pool::register(m)?;
     raster::register(m)?;
     rod::register(m)?;
     Ok(())

@@ -1,7 +1,106 @@
-//! Bindings for the raster crate (filled in with its issue).
+//! Bindings for `sketchrodgs-raster`: `_core.rasterize(...)`.
 
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use sketchrodgs_raster::{Camera, RasterError, RenderMode, RenderOptions, RenderOutput, Splats};
 
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+use crate::arrays::{check_shape, contiguous};
+use crate::pool::run_parallel;
+use crate::errors::SketchRodGSError;
+
+fn raster_err(err: RasterError) -> PyErr {
+    SketchRodGSError::new_err(err.to_string())
+}
+
+/// Renders a Gaussian scene for a pinhole camera (see `sketchrodgs.render` for the public API).
+///
+/// Arrays are float32 and C-contiguous: means (N, 3), scales (N, 3), quats (N, 4) wxyz,
+/// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a dict of numpy
+/// arrays (rgb (H, W, 3), alpha, depth, index (int32), index_depth, each (H, W); the first three
+/// are None when `index_only`), the stage timings in seconds and the visible/pair counts.
+#[pyfunction]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), index_only = false))]
+#[allow(clippy::too_many_arguments)]
+fn rasterize<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyArray2<f32>>,
+    scales: &Bound<'py, PyArray2<f32>>,
+    quats: &Bound<'py, PyArray2<f32>>,
+    opacities: &Bound<'py, PyArray1<f32>>,
+    sh: &Bound<'py, PyArray3<f32>>,
+    world_to_camera: &Bound<'py, PyArray2<f64>>,
+    width: u32,
+    height: u32,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    background: (f32, f32, f32),
+    index_only: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
+    let (opacities, sh, w2c) = (opacities.try_readonly()?, sh.try_readonly()?, world_to_camera.try_readonly()?);
+    let n = means.shape()[0];
+    check_shape("means", means.shape(), &[None, Some(3)])?;
+    check_shape("scales", scales.shape(), &[Some(n), Some(3)])?;
+    check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
+    check_shape("opacities", opacities.shape(), &[Some(n)])?;
+    check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
+    check_shape("world_to_camera", w2c.shape(), &[Some(4), Some(4)])?;
+    let splats = Splats::from_flat(
+        contiguous(&means, "means")?,
+        contiguous(&scales, "scales")?,
+        contiguous(&quats, "quats")?,
+        contiguous(&opacities, "opacities")?,
+        contiguous(&sh, "sh")?,
+        sh.shape()[1],
+    )
+    .map_err(raster_err)?;
+    let m = contiguous(&w2c, "world_to_camera")?;
+    let mut matrix = [[0.0f64; 4]; 4];
+    for (row, values) in matrix.iter_mut().zip(m.chunks_exact(4)) {
+        row.copy_from_slice(values);
+    }
+    let camera = Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix };
+    let options = RenderOptions {
+        background: [background.0, background.1, background.2],
+        mode: if index_only { RenderMode::IndexOnly } else { RenderMode::Full },
+    };
+
+    let out = run_parallel(py, "rasterize", || sketchrodgs_raster::rasterize(&splats, &camera, &options))?;
+    let out = out.map_err(raster_err)?;
+    into_dict(py, out)
+}
+
+/// Moves the output buffers into numpy arrays without copying.
+fn into_dict(py: Python<'_>, out: RenderOutput) -> PyResult<Bound<'_, PyDict>> {
+    let (h, w) = (out.height, out.width);
+    let shape_err = |e: numpy::ndarray::ShapeError| SketchRodGSError::new_err(format!("internal shape error: {e}"));
+    let dict = PyDict::new(py);
+    if out.rgb.is_empty() {
+        for key in ["rgb", "alpha", "depth"] {
+            dict.set_item(key, py.None())?;
+        }
+    } else {
+        dict.set_item("rgb", Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py))?;
+        dict.set_item("alpha", Array2::from_shape_vec((h, w), out.alpha).map_err(shape_err)?.into_pyarray(py))?;
+        dict.set_item("depth", Array2::from_shape_vec((h, w), out.depth).map_err(shape_err)?.into_pyarray(py))?;
+    }
+    dict.set_item("index", Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py))?;
+    dict.set_item("index_depth", Array2::from_shape_vec((h, w), out.index_depth).map_err(shape_err)?.into_pyarray(py))?;
+    let timings = PyDict::new(py);
+    timings.set_item("project", out.timings.project_s)?;
+    timings.set_item("sort", out.timings.sort_s)?;
+    timings.set_item("composite", out.timings.composite_s)?;
+    dict.set_item("timings", timings)?;
+    dict.set_item("n_visible", out.n_visible)?;
+    dict.set_item("n_tile_pairs", out.n_tile_pairs)?;
+    Ok(dict)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(rasterize, m)?)?;
     Ok(())
 }

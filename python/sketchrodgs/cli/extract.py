@@ -1,0 +1,82 @@
+"""`sketchrodgs extract SCENE --camera CAM.json --stroke STROKE.json -o rod.json`: sketch to rod."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import load_cameras, select_camera
+from ..errors import SketchRodGSError
+from ..extract import extract_rod
+from ..images import draw_overlay, save_png
+from ..io import load_scene
+from ..render import render
+from ._args import scene_path
+
+NAME = "extract"
+HELP = "find the 3D polyline of the slender object under a stroke and write it as rod JSON"
+
+
+def _positive(value: str) -> float:
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
+    if not number > 0 or number == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {value}")
+    return number
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", type=scene_path, help="scene file (.ply or .splat), or sample:NAME")
+    parser.add_argument("--camera", required=True, metavar="CAM.json", help="our camera JSON or a 3DGS cameras.json")
+    parser.add_argument("--view", metavar="N|NAME", help="which camera of the file (default: the first)")
+    parser.add_argument("--stroke", required=True, metavar="STROKE.json",
+                        help='the stroke in pixel coordinates of that camera: {"points": [[x, y], ...]}')
+    parser.add_argument("--radius", type=_positive, help="the object's radius R in scene units (default: estimated)")
+    parser.add_argument("--alpha", type=float, default=1.0, help="weight of the stroke term of the path cost (default 1)")
+    parser.add_argument("--edge-length", type=_positive, help="spacing of the polyline vertices (default: from R and length)")
+    parser.add_argument("-o", "--output", required=True, metavar="ROD.json", help="rod JSON to write")
+    parser.add_argument("--overlay", metavar="OVERLAY.png", help="also draw the render with stroke, path and polyline")
+
+
+def load_stroke(path: str) -> np.ndarray:
+    """Read a stroke JSON (`{"points": [[x, y], ...]}` or a bare list) as an (S, 2) array."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise SketchRodGSError(f"{path}: cannot read ({exc.strerror})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SketchRodGSError(f"{path}: not valid JSON ({exc})") from None
+    points = data.get("points") if isinstance(data, dict) else data
+    try:
+        array = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = np.empty(0)
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise SketchRodGSError(f'{path}: expected {{"points": [[x, y], ...]}}, got points of shape {array.shape}')
+    return array
+
+
+def run(args: argparse.Namespace) -> int:
+    camera = select_camera(load_cameras(args.camera), args.view, args.camera)
+    stroke = load_stroke(args.stroke)
+    scene = load_scene(args.scene)
+    images = render(scene, camera, outputs="all" if args.overlay else "index")
+    extraction = extract_rod(scene, camera, stroke, args.radius, alpha=args.alpha, edge_length=args.edge_length,
+                             render=images)
+    extraction.save(args.output)
+    if args.overlay:
+        overlay = draw_overlay(images.rgb, camera, extraction.stroke, extraction.pixel_path, extraction.polyline,
+                               scene.means[extraction.gaussian_ids])
+        save_png(args.overlay, overlay)
+    pieces = len(extraction.pixel_path)
+    print(f"rod: {len(extraction.polyline)} vertices, radius {extraction.radius:.4g}, edge {extraction.edge_length:.4g}; "
+          f"{len(extraction.gaussian_ids):,} Gaussians bound; stroke covered {extraction.coverage:.0%} "
+          f"in {pieces} piece{'s' if pieces > 1 else ''} -> {args.output}")
+    timings = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in extraction.timings.items())
+    print(f"timings: {timings}")
+    return 0

@@ -1,0 +1,255 @@
+"""Sketch to rod: from one stroke on a view, the 3D polyline of the slender object under it and the
+Gaussians that belong to it (paper: Path Optimization, Occlusion, Post Process; DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from . import _core
+from . import polyline as pl
+from .atomic import atomic_write_text
+from .camera import Camera
+from .errors import PathNotFoundError, SketchRodGSError
+from .render import RenderResult, render
+from .scene import GaussianScene
+
+DEFAULT_SMOOTHING_ITERATIONS = 10
+# Gaussians within this many radii of the axis belong to the object. Surface Gaussians sit at
+# about one radius from the axis, so exactly R would cut the tube's skin in half.
+DEFAULT_SEGMENT_SCALE = 1.5
+
+
+@dataclass(frozen=True, eq=False)
+class Extraction:
+    """What `extract_rod` found.
+
+    Attributes:
+        polyline: (M, 3) float32 rest polyline of the object's axis, resampled uniformly.
+        radius: R used (given, or estimated from the image).
+        edge_length: target spacing of the polyline vertices.
+        pixel_path: list of (P_i, 2) int arrays, the (col, row) pixels of each path piece.
+        path_gaussian_ids: (L,) int64 Gaussians along the pixel path, in order (pieces joined).
+        gaussian_ids: (G,) int64 segmented Gaussians (within `segment_scale * R` of the polyline).
+        binding: where each segmented Gaussian sits on the rest polyline.
+        coverage: fraction of the stroke within 10 px of the path.
+        pieces_reached_goal: whether each piece reached the stroke's end (False: lost at a gap).
+        camera: the camera the stroke was drawn in.
+        stroke: (S, 2) float32 stroke in pixel coordinates.
+        timings: seconds per stage.
+    """
+
+    polyline: np.ndarray
+    radius: float
+    edge_length: float
+    pixel_path: list[np.ndarray]
+    path_gaussian_ids: np.ndarray
+    gaussian_ids: np.ndarray
+    binding: pl.Binding
+    coverage: float
+    pieces_reached_goal: list[bool]
+    camera: Camera
+    stroke: np.ndarray
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self, material: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The rod JSON of DESIGN.md (polyline, radius, edge_length, camera, stroke, gaussian_ids, ...)."""
+        return {
+            "polyline": self.polyline.tolist(),
+            "radius": self.radius,
+            "edge_length": self.edge_length,
+            "camera": self.camera.to_dict(),
+            "stroke": self.stroke.tolist(),
+            "gaussian_ids": self.gaussian_ids.tolist(),
+            "binding": {
+                "segment": self.binding.segment.tolist(),
+                "t": self.binding.t.tolist(),
+                "offset": self.binding.offset.tolist(),
+            },
+            "coverage": self.coverage,
+            "material": material or {},
+        }
+
+    def save(self, path: str | os.PathLike[str], material: dict[str, Any] | None = None) -> None:
+        """Write the rod JSON atomically."""
+        atomic_write_text(path, json.dumps(self.to_json(material)) + "\n")
+
+
+def extract_rod(
+    scene: GaussianScene,
+    camera: Camera,
+    stroke: np.ndarray,
+    radius: float | None = None,
+    *,
+    alpha: float = 1.0,
+    band_px: float | None = None,
+    edge_length: float | None = None,
+    smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS,
+    segment_scale: float = DEFAULT_SEGMENT_SCALE,
+    recentre: bool = True,
+    render: RenderResult | None = None,
+) -> Extraction:
+    """Extract the slender object under `stroke`.
+
+    Args:
+        scene: the scene.
+        camera: the camera the stroke was drawn in.
+        stroke: (S, 2) stroke points in continuous pixel coordinates of `camera`.
+        radius: R, the object's radius in world units. When None it is estimated: roughly from the
+            object's width on screen, then as the median distance of its Gaussians to the axis.
+        alpha: weight of the stroke-distance term of the path cost (paper Eq. 1).
+        band_px: half-width of the band around the stroke (default 1 % of the image width).
+        edge_length: polyline spacing (default from R and the object's length).
+        smoothing_iterations: Laplacian smoothing steps before resampling (ends fixed).
+        segment_scale: Gaussians within `segment_scale * R` of the axis are segmented.
+        recentre: move the visible surface points onto the axis (our addition; the paper keeps them).
+        render: a render of `scene` by `camera` with `index` and `index_depth` (made if None).
+
+    Raises:
+        PathNotFoundError: the stroke misses the object or the path is too short to make a rod.
+        SketchRodGSError: bad arguments (the message names which).
+    """
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+    stroke = _check_stroke(stroke)
+    for name, value in (("alpha", alpha), ("segment_scale", segment_scale)):
+        if not np.isfinite(value) or value < 0:
+            raise SketchRodGSError(f"{name}: must be finite and >= 0, got {value}")
+    if radius is not None and not (np.isfinite(radius) and radius > 0):
+        raise SketchRodGSError(f"radius: must be finite and > 0, got {radius}")
+    if band_px is not None and not (np.isfinite(band_px) and band_px > 0):
+        raise SketchRodGSError(f"band_px: must be finite and > 0, got {band_px}")
+    if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
+        raise SketchRodGSError(f"edge_length: must be finite and > 0, got {edge_length}")
+
+    if render is None:
+        render = _render_index(scene, camera)
+        timings["render"] = time.perf_counter() - clock
+    if render.index.shape != (camera.height, camera.width):
+        raise SketchRodGSError(f"render: index image is {render.index.shape}, camera is {camera.height}x{camera.width}")
+
+    clock = time.perf_counter()
+    estimated = radius is None
+    if radius is None:
+        # the screen width over-estimates R (it includes the Gaussians' blur); it is refined below
+        radius = estimate_radius(render.index, render.index_depth, camera, stroke)
+        timings["estimate_radius"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+
+    trace = _core.trace_stroke(
+        np.ascontiguousarray(render.index, np.int32),
+        np.ascontiguousarray(render.index_depth, np.float32),
+        scene.means,
+        stroke,
+        float(radius),
+        float(alpha),
+        float(band_px or 0.0),
+    )
+    timings["path_search"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    pieces = trace["pieces"]
+    path_ids = np.concatenate([p["gaussian_ids"].astype(np.int64) for p in pieces])
+    _, first = np.unique(path_ids, return_index=True)
+    path_ids = path_ids[np.sort(first)]  # one visit per Gaussian, in path order
+    # The path hops between Gaussians scattered over the surface; a little smoothing takes out the
+    # zigzag before the chain is resampled by arc length.
+    points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
+    if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
+        raise PathNotFoundError(
+            f"the path under the stroke is too short for a rod ({len(path_ids)} Gaussians, "
+            f"{pl.polyline_length(points) if len(points) > 1 else 0.0:.3g} long, radius {radius:.3g})"
+        )
+    # Recentre on a uniform sampling at half the radius, then smooth and resample to the edge length.
+    points = pl.resample(points, radius / 2)
+    if recentre:
+        nearby = scene.means[pl.near_box(points, scene.means, 2.5 * radius)]
+        points = pl.recentre(points, nearby, radius)
+    if estimated:
+        radius = refine_radius(points, scene.means, radius)
+    points = pl.laplacian_smooth(points, smoothing_iterations)
+    length = pl.polyline_length(points)
+    spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
+    polyline = pl.resample(points, spacing)
+    timings["polyline"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    binding = pl.bind_nearest(polyline, scene.means, segment_scale * radius)
+    timings["segment_bind"] = time.perf_counter() - clock
+    return Extraction(
+        polyline=polyline.astype(np.float32),
+        radius=float(radius),
+        edge_length=float(spacing),
+        pixel_path=[p["pixels"].astype(np.int64) for p in pieces],
+        path_gaussian_ids=path_ids,
+        gaussian_ids=binding.gaussian_ids,
+        binding=binding,
+        coverage=float(trace["coverage"]),
+        pieces_reached_goal=[bool(p["reached_goal"]) for p in pieces],
+        camera=camera,
+        stroke=stroke,
+        timings=timings,
+    )
+
+
+def _render_index(scene: GaussianScene, camera: Camera) -> RenderResult:
+    return render(scene, camera, outputs="index")
+
+
+def _check_stroke(stroke: np.ndarray) -> np.ndarray:
+    try:
+        points = np.ascontiguousarray(stroke, dtype=np.float32)
+    except (TypeError, ValueError):
+        raise SketchRodGSError("stroke: expected an (S, 2) array of pixel coordinates") from None
+    if points.ndim != 2 or points.shape[1] != 2:
+        raise SketchRodGSError(f"stroke: expected shape (S, 2), got {points.shape}")
+    if len(points) < 2:
+        raise SketchRodGSError(f"stroke: needs at least 2 points, got {len(points)}")
+    if not np.isfinite(points).all():
+        bad = int(np.argmax(~np.isfinite(points).all(axis=1)))
+        raise SketchRodGSError(f"stroke: point {bad} is not finite")
+    return points
+
+
+def estimate_radius(index: np.ndarray, depth: np.ndarray, camera: Camera, stroke: np.ndarray) -> float:
+    """Estimate R from the object's screen width across the stroke: half the width in pixels
+    times depth over focal length (median over the stroke's points on the object).
+
+    The width at a stroke point is the run of object pixels, perpendicular to the stroke, whose
+    depth stays within 5 % of the depth under the point.
+    """
+    height, width = index.shape
+    directions = np.gradient(stroke.astype(np.float64), axis=0)
+    norms = np.linalg.norm(directions, axis=1, keepdims=True)
+    normals = np.divide(directions[:, ::-1] * [1, -1], norms, out=np.zeros_like(directions), where=norms > 0)
+    cols, rows = np.floor(stroke[:, 0]).astype(int), np.floor(stroke[:, 1]).astype(int)
+    on_object = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height) & normals.any(axis=1)
+    on_object[on_object] = index[rows[on_object], cols[on_object]] >= 0
+    if not on_object.any():
+        raise PathNotFoundError("no stroke point lies on the object (the stroke is on background), so the radius cannot be estimated")
+    points, normals = stroke[on_object].astype(np.float64), normals[on_object]
+    z0 = depth[rows[on_object], cols[on_object]][:, None]
+    steps = np.arange(1, max(width, height) // 4)[None, :]
+    run = np.ones(len(points))
+    for sign in (1, -1):  # walk out to both sides of the stroke, across it
+        c = np.floor(points[:, :1] + sign * steps * normals[:, :1]).astype(int)
+        r = np.floor(points[:, 1:] + sign * steps * normals[:, 1:]).astype(int)
+        inside = (c >= 0) & (c < width) & (r >= 0) & (r < height)
+        c, r = np.where(inside, c, 0), np.where(inside, r, 0)
+        same = inside & (index[r, c] >= 0) & (np.abs(depth[r, c] - z0) <= 0.05 * z0)
+        run += np.where(same.all(axis=1), steps.shape[1], np.argmin(same, axis=1))
+    return float(np.median(0.5 * run * z0[:, 0] / camera.fx))
+
+
+def refine_radius(axis: np.ndarray, centres: np.ndarray, rough: float) -> float:
+    """R as the median distance to the axis of the Gaussians within 1.5 x `rough` of it: on a
+    tube's skin that distance is the radius (the paper's suggested spread estimate)."""
+    binding = pl.bind_nearest(axis, centres, 1.5 * rough)
+    if len(binding.distance) < 10:
+        return rough
+    return float(np.median(binding.distance))

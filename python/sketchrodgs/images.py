@@ -1,0 +1,69 @@
+"""Pictures: 8-bit conversion, PNG writing, and overlays of stroke, path and polyline."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from .atomic import atomic_open
+from .camera import Camera
+
+STROKE_COLOUR = (40, 220, 90)
+PATH_COLOUR = (255, 60, 40)
+POLYLINE_COLOUR = (60, 140, 255)
+SEGMENT_COLOUR = (255, 220, 0)
+
+
+def to_uint8(rgb: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float colour -> uint8, clamped to [0, 1] and rounded (NaN -> 0)."""
+    return (np.clip(np.nan_to_num(rgb), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def save_png(path: str | os.PathLike[str], image: np.ndarray | Image.Image) -> None:
+    """Write an (H, W, 3) image (uint8, or float in [0, 1]) or a PIL image as PNG, atomically."""
+    if not isinstance(image, Image.Image):
+        pixels = image if image.dtype == np.uint8 else to_uint8(image)
+        image = Image.fromarray(np.ascontiguousarray(pixels), "RGB")
+    with atomic_open(path) as stream:
+        image.save(stream, format="PNG")
+
+
+def draw_overlay(
+    rgb: np.ndarray,
+    camera: Camera,
+    stroke: np.ndarray,
+    pixel_path: Sequence[np.ndarray] = (),
+    polyline: np.ndarray | None = None,
+    highlight: np.ndarray | None = None,
+) -> Image.Image:
+    """The render with what extraction saw and found drawn on it.
+
+    Args:
+        rgb: (H, W, 3) render of `camera`.
+        camera: the view.
+        stroke: (S, 2) the user's stroke (green).
+        pixel_path: pieces of the pixel path, (P, 2) (col, row) each (red).
+        polyline: (M, 3) the 3D polyline, projected (blue, with its vertices).
+        highlight: (G, 3) points to mark, e.g. the segmented Gaussians' centres (yellow dots).
+    """
+    base = Image.fromarray(to_uint8(rgb) if rgb.dtype != np.uint8 else rgb, "RGB")
+    # dim the render so the drawing stands out
+    image = Image.blend(base, Image.new("RGB", base.size, (0, 0, 0)), 0.35)
+    draw = ImageDraw.Draw(image)
+    if highlight is not None and len(highlight):
+        uv, depth = camera.project(highlight)
+        for u, v in uv[depth > 0]:
+            draw.point((float(u), float(v)), fill=SEGMENT_COLOUR)
+    draw.line([tuple(map(float, p)) for p in stroke], fill=STROKE_COLOUR, width=3, joint="curve")
+    for piece in pixel_path:
+        draw.point([(float(c) + 0.5, float(r) + 0.5) for c, r in piece], fill=PATH_COLOUR)
+    if polyline is not None and len(polyline) > 1:
+        uv, depth = camera.project(polyline)
+        visible = [tuple(map(float, p)) for p, z in zip(uv, depth) if z > 0]
+        draw.line(visible, fill=POLYLINE_COLOUR, width=2)
+        for u, v in visible:
+            draw.ellipse((u - 2, v - 2, u + 2, v + 2), outline=POLYLINE_COLOUR)
+    return image

@@ -1,0 +1,88 @@
+//! Bindings for `sketchrodgs-path`: `_core.trace_stroke(...)`.
+
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use sketchrodgs_path::{IndexImage, PathError, PieceEnd, TraceParams};
+
+use crate::arrays::{as_rows, check_shape, contiguous};
+use crate::pool::run_parallel;
+use crate::errors::{PathNotFoundError, SketchRodGSError};
+
+fn path_err(err: PathError) -> PyErr {
+    match err {
+        PathError::StrokeOnBackground | PathError::EndpointOffObject { .. } => PathNotFoundError::new_err(err.to_string()),
+        _ => SketchRodGSError::new_err(err.to_string()),
+    }
+}
+
+/// Screen-space path under a stroke (see `sketchrodgs.extract_rod` for the public API).
+///
+/// index (H, W) int32 and depth (H, W) float32 are the index image K and its depth Z; centres
+/// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width.
+/// Returns {"pieces": [{"pixels": (P, 2) uint32 (col, row), "gaussian_ids": (G,) uint32,
+/// "reached_goal": bool, "lost_pixel": (col, row) | None, "lost_progress": float | None}],
+/// "clean_stroke": (M', 2) float32, "coverage": float}.
+#[pyfunction]
+#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0))]
+#[allow(clippy::too_many_arguments)]
+fn trace_stroke<'py>(
+    py: Python<'py>,
+    index: &Bound<'py, PyArray2<i32>>,
+    depth: &Bound<'py, PyArray2<f32>>,
+    centres: &Bound<'py, PyArray2<f32>>,
+    stroke: &Bound<'py, PyArray2<f32>>,
+    radius: f32,
+    stroke_weight: f64,
+    band_px: f32,
+    cover_px: f32,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (index, depth, centres, stroke) = (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
+    let (height, width) = (index.shape()[0], index.shape()[1]);
+    check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
+    check_shape("centres", centres.shape(), &[None, Some(3)])?;
+    check_shape("stroke", stroke.shape(), &[None, Some(2)])?;
+    let image = IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?).map_err(path_err)?;
+    let centres: &[[f32; 3]] = as_rows(contiguous(&centres, "centres")?);
+    let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
+    let params = TraceParams { radius, stroke_weight, band_px, cover_px };
+    let trace = run_parallel(py, "trace_stroke", || sketchrodgs_path::trace_stroke(&image, centres, stroke, &params))?
+        .map_err(path_err)?;
+
+    let pieces = PyList::empty(py);
+    for piece in trace.pieces {
+        let dict = PyDict::new(py);
+        let count = piece.pixels.len();
+        let pixels = Array2::from_shape_vec((count, 2), piece.pixels.into_iter().flatten().collect())
+            .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+        dict.set_item("pixels", pixels.into_pyarray(py))?;
+        dict.set_item("gaussian_ids", piece.gaussian_ids.into_pyarray(py))?;
+        match piece.end {
+            PieceEnd::Goal => {
+                dict.set_item("reached_goal", true)?;
+                dict.set_item("lost_pixel", py.None())?;
+                dict.set_item("lost_progress", py.None())?;
+            }
+            PieceEnd::Lost { pixel, progress } => {
+                dict.set_item("reached_goal", false)?;
+                dict.set_item("lost_pixel", (pixel[0], pixel[1]))?;
+                dict.set_item("lost_progress", progress)?;
+            }
+        }
+        pieces.append(dict)?;
+    }
+    let out = PyDict::new(py);
+    out.set_item("pieces", pieces)?;
+    let kept = trace.clean_stroke.len();
+    let clean = Array2::from_shape_vec((kept, 2), trace.clean_stroke.into_iter().flatten().collect())
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    out.set_item("clean_stroke", clean.into_pyarray(py))?;
+    out.set_item("coverage", trace.coverage)?;
+    Ok(out)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(trace_stroke, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,72 @@
+//! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`.
+
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use crate::arrays::{as_rows, check_shape, contiguous};
+use crate::pool::run_parallel;
+use crate::errors::SketchRodGSError;
+
+type NearestArrays<'py> = (Bound<'py, PyArray1<i32>>, Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>);
+
+/// Nearest point on `polyline` (M, 3) float32 for each of `points` (N, 3) float32 within `reach`.
+///
+/// Returns (segment (N,) int32, -1 where nothing is within reach; t (N,) float32 in [0, 1];
+/// distance (N,) float32, inf where nothing is within reach).
+#[pyfunction]
+fn nearest_on_polyline<'py>(
+    py: Python<'py>,
+    polyline: &Bound<'py, PyArray2<f32>>,
+    points: &Bound<'py, PyArray2<f32>>,
+    reach: f64,
+) -> PyResult<NearestArrays<'py>> {
+    let (polyline, points) = (polyline.try_readonly()?, points.try_readonly()?);
+    check_shape("polyline", polyline.shape(), &[None, Some(3)])?;
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let polyline: &[[f32; 3]] = as_rows(contiguous(&polyline, "polyline")?);
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let found = run_parallel(py, "nearest_on_polyline", || sketchrodgs_polyline::nearest_on_polyline(polyline, points, reach))?
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let segment: Vec<i32> = found.iter().map(|n| n.map_or(-1, |n| n.segment as i32)).collect();
+    let t: Vec<f32> = found.iter().map(|n| n.map_or(0.0, |n| n.t)).collect();
+    let distance: Vec<f32> = found.iter().map(|n| n.map_or(f32::INFINITY, |n| n.distance)).collect();
+    Ok((segment.into_pyarray(py), t.into_pyarray(py), distance.into_pyarray(py)))
+}
+
+/// Centroids of the cross-sections of `axis` (M, 3) float64 with unit `tangents` (M, 3) float64,
+/// from `points` (N, 3) float32 tried against their `nearest_vertex` (N,) int32 (-1: none) and its
+/// neighbours. Returns (centroids (M, 3) float64, counts (M,) uint32).
+#[pyfunction]
+fn cross_section_centroids<'py>(
+    py: Python<'py>,
+    axis: &Bound<'py, PyArray2<f64>>,
+    tangents: &Bound<'py, PyArray2<f64>>,
+    points: &Bound<'py, PyArray2<f32>>,
+    nearest_vertex: &Bound<'py, PyArray1<i32>>,
+    half_width: f64,
+    reach: f64,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u32>>)> {
+    let (axis, tangents) = (axis.try_readonly()?, tangents.try_readonly()?);
+    let (points, nearest) = (points.try_readonly()?, nearest_vertex.try_readonly()?);
+    let m = axis.shape()[0];
+    check_shape("axis", axis.shape(), &[None, Some(3)])?;
+    check_shape("tangents", tangents.shape(), &[Some(m), Some(3)])?;
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    check_shape("nearest_vertex", nearest.shape(), &[Some(points.shape()[0])])?;
+    let axis: &[[f64; 3]] = contiguous(&axis, "axis")?.as_chunks::<3>().0;
+    let tangents: &[[f64; 3]] = contiguous(&tangents, "tangents")?.as_chunks::<3>().0;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let nearest = contiguous(&nearest, "nearest_vertex")?;
+    let (centroids, counts) = run_parallel(py, "cross_section_centroids", || {
+        sketchrodgs_polyline::cross_section_centroids(axis, tangents, points, nearest, half_width, reach)
+    })?;
+    let centroids = numpy::ndarray::Array2::from_shape_vec((m, 3), centroids.into_iter().flatten().collect())
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    Ok((centroids.into_pyarray(py), counts.into_pyarray(py)))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
+    m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,169 @@
+//! Depth sort and tile binning (INRIA `duplicateWithKeys` + radix sort + `identifyTileRanges`).
+//!
+//! The reference sorts `(tile << 32 | depth bits)` keys, stable, emitted in Gaussian order, so a
+//! tile's list runs front to back with equal depths in ascending index. We get the same lists by
+//! sorting the visible Gaussians once by `(depth, index)` and then distributing them, in that
+//! order, into per-tile lists. The distribution runs on contiguous chunks of the depth order in
+//! parallel, each chunk keeping its own lists; a tile's list is the concatenation of its chunk
+//! lists in chunk order, which is again front to back. No step depends on the thread count.
+
+use rayon::prelude::*;
+
+use crate::camera::Camera;
+use crate::project::{MIN_GAUSSIANS_PER_TASK, Splat2D, TileRect};
+
+/// Most per-chunk tile counters kept in memory at once (chunks x tiles).
+const MAX_CHUNK_COUNTERS: usize = 1 << 22;
+/// Sorted Gaussians per binning chunk.
+const GAUSSIANS_PER_CHUNK: usize = 16384;
+
+/// The visible (non-culled) Gaussians, front to back: sorted by camera z, ties by ascending
+/// index (the order the reference's stable key sort gives).
+pub fn sort_by_depth(splats: &[Splat2D], rects: &[TileRect]) -> Vec<u32> {
+    // z > NEAR_PLANE > 0, so the f32 bit pattern orders like the value. Keys are made in index
+    // order and the sort is stable, so equal depths stay in ascending index.
+    let mut keys: Vec<u64> = splats
+        .par_iter()
+        .zip(rects)
+        .enumerate()
+        .with_min_len(MIN_GAUSSIANS_PER_TASK)
+        .filter(|(_, (_, r))| !r.is_empty())
+        .map(|(i, (s, _))| (u64::from(s.depth.to_bits()) << 32) | i as u64)
+        .collect();
+    radix_sort_by_high_word(&mut keys);
+    let mut order = Vec::new();
+    keys.par_iter().with_min_len(MIN_GAUSSIANS_PER_TASK).map(|k| *k as u32).collect_into_vec(&mut order);
+    order
+}
+
+/// Stable LSD radix sort of `keys` by their upper 32 bits, 8 bits a pass: keys with equal upper
+/// halves keep their input order. Passes where every key has the same digit are skipped.
+fn radix_sort_by_high_word(keys: &mut Vec<u64>) {
+    let mut counts = [[0usize; 256]; 4];
+    for &k in keys.iter() {
+        for (pass, count) in counts.iter_mut().enumerate() {
+            count[(k >> (32 + 8 * pass)) as usize & 0xff] += 1;
+        }
+    }
+    let mut scratch = vec![0u64; keys.len()];
+    for (pass, count) in counts.iter().enumerate() {
+        if count.contains(&keys.len()) {
+            continue;
+        }
+        let mut next = [0usize; 256];
+        let mut total = 0;
+        for (slot, &c) in next.iter_mut().zip(count) {
+            *slot = total;
+            total += c;
+        }
+        for &k in keys.iter() {
+            let digit = (k >> (32 + 8 * pass)) as usize & 0xff;
+            scratch[next[digit]] = k;
+            next[digit] += 1;
+        }
+        std::mem::swap(keys, &mut scratch);
+    }
+}
+
+/// The per-tile lists of Gaussian indices, front to back.
+#[derive(Debug)]
+pub struct TileBins {
+    pub grid_x: u32,
+    pub grid_y: u32,
+    chunks: Vec<ChunkBins>,
+}
+
+/// The lists of one contiguous chunk of the sorted order: tile t owns
+/// `entries[offsets[t]..offsets[t + 1]]`.
+#[derive(Debug)]
+struct ChunkBins {
+    offsets: Vec<u32>,
+    entries: Vec<u32>,
+}
+
+impl TileBins {
+    /// Bins the Gaussians `order` (front to back) into the tiles of their `rects`.
+    pub fn new(camera: &Camera, rects: &[TileRect], order: &[u32]) -> Self {
+        let (grid_x, grid_y) = camera.tile_grid();
+        let n_tiles = (grid_x * grid_y) as usize;
+        // Bound the counters' memory on very large images by using longer chunks.
+        let max_chunks = (MAX_CHUNK_COUNTERS / n_tiles.max(1)).max(1);
+        let chunk_len = GAUSSIANS_PER_CHUNK.max(order.len().div_ceil(max_chunks)).max(1);
+        let chunks = order.par_chunks(chunk_len).map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles)).collect();
+        Self { grid_x, grid_y, chunks }
+    }
+
+    /// Total number of (tile, Gaussian) pairs.
+    pub fn len(&self) -> usize {
+        self.chunks.iter().map(|c| c.entries.len()).sum()
+    }
+
+    /// Whether no Gaussian touches any tile.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Tile `tile`'s list, front to back, as consecutive slices of Gaussian indices.
+    pub fn tile_lists(&self, tile: usize) -> impl Iterator<Item = &[u32]> + '_ {
+        self.chunks.iter().filter_map(move |c| {
+            let start = *c.offsets.get(tile)? as usize;
+            let end = *c.offsets.get(tile + 1)? as usize;
+            c.entries.get(start..end).filter(|s| !s.is_empty())
+        })
+    }
+}
+
+impl ChunkBins {
+    fn new(order: &[u32], rects: &[TileRect], grid_x: u32, n_tiles: usize) -> Self {
+        let tiles = |i: u32| {
+            let r = rects.get(i as usize).copied().unwrap_or_default();
+            let grid_x = grid_x as usize;
+            (r.y0..r.y1).flat_map(move |ty| (r.x0..r.x1).map(move |tx| usize::from(ty) * grid_x + usize::from(tx)))
+        };
+        // Counting sort by tile, stable in depth order.
+        let mut offsets = vec![0u32; n_tiles + 1];
+        for &i in order {
+            for t in tiles(i) {
+                offsets[t + 1] += 1;
+            }
+        }
+        for t in 0..n_tiles {
+            offsets[t + 1] += offsets[t];
+        }
+        let mut cursor = offsets.clone();
+        let mut entries = vec![0u32; offsets[n_tiles] as usize];
+        for &i in order {
+            for t in tiles(i) {
+                entries[cursor[t] as usize] = i;
+                cursor[t] += 1;
+            }
+        }
+        Self { offsets, entries }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn radix_sort_orders_by_depth_then_input_order() {
+        let mut state = 7u64;
+        let mut keys: Vec<u64> = (0..20_000u64)
+            .map(|i| {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                // Few distinct depths, so ties are common; positive floats of all magnitudes.
+                let depth = 0.2f32 + ((state >> 33) % 500) as f32 * 37.5;
+                (u64::from(depth.to_bits()) << 32) | i
+            })
+            .collect();
+        let mut expected = keys.clone();
+        expected.sort_unstable();
+        radix_sort_by_high_word(&mut keys);
+        assert_eq!(keys, expected);
+        let mut empty: Vec<u64> = vec![];
+        radix_sort_by_high_word(&mut empty);
+        assert!(empty.is_empty());
+    }
+}

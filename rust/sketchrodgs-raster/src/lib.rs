@@ -1,0 +1,250 @@
+//! CPU rasteriser for 3D Gaussian Splatting scenes, following the reference 3DGS rasteriser
+//! (graphdeco-inria `diff-gaussian-rasterization`) equation for equation: EWA projection with
+//! a 0.3 px² low-pass, 3-sigma tile footprint, 16x16 tiles, front-to-back blending sorted by
+//! view-space depth, alpha capped at 0.99, contributions below 1/255 skipped, and a stop once the
+//! transmittance would drop below 1e-4.
+//!
+//! Besides colour it renders what the sketch needs: the index image K (the Gaussian with the
+//! largest blending weight `alpha_i * T_i` at each pixel) and its camera depth Z.
+//!
+//! Stages, each deterministic (the output never depends on the thread count): [`project`] every
+//! Gaussian (parallel), sort the visible ones by depth (a stable radix sort) and bin them into
+//! per-tile lists (parallel, [`bin`]), then [`composite`] each row of tiles (parallel) into
+//! disjoint parts of the outputs. Compositing works on 4-pixel SIMD groups (SSE2, portable
+//! fallback elsewhere) and allocates nothing per pixel or per tile.
+//!
+//! ```
+//! use glam::Vec3;
+//! use sketchrodgs_raster::{rasterize, Camera, RenderOptions, Splats};
+//!
+//! let camera = Camera {
+//!     width: 64, height: 48, fx: 50.0, fy: 50.0, cx: 32.0, cy: 24.0,
+//!     world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+//! };
+//! let means = [Vec3::new(0.0, 0.0, 2.0)];
+//! let scales = [Vec3::splat(0.05)];
+//! let quats = [[1.0, 0.0, 0.0, 0.0]];
+//! let opacities = [0.9];
+//! let sh = [1.0, 0.0, -1.0]; // degree 0: one RGB coefficient per Gaussian
+//! let splats = Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: 1 };
+//! let out = rasterize(&splats, &camera, &RenderOptions::default()).unwrap();
+//! assert_eq!(out.index[24 * 64 + 32], 0); // the pixel under the mean sees Gaussian 0
+//! assert_eq!(out.index[0], -1);           // a corner sees nothing
+//! ```
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+pub mod bin;
+pub mod camera;
+pub mod composite;
+pub mod project;
+mod simd;
+#[cfg(test)]
+mod tests;
+
+pub use camera::{Camera, MAX_IMAGE_SIDE};
+
+/// Tiles are `TILE_SIZE x TILE_SIZE` pixels (INRIA's BLOCK_X = BLOCK_Y = 16).
+pub const TILE_SIZE: u32 = 16;
+/// Gaussians whose centre has camera z at or below this are culled (INRIA `in_frustum`).
+pub const NEAR_PLANE: f32 = 0.2;
+/// Low-pass filter added to both diagonal entries of the 2D covariance, in px².
+pub const LOW_PASS: f32 = 0.3;
+/// Footprint radius in standard deviations of the major axis.
+pub const SIGMA_EXTENT: f32 = 3.0;
+/// Per-Gaussian alpha is capped here so that one Gaussian never makes a pixel fully opaque.
+pub const ALPHA_MAX: f32 = 0.99;
+/// Contributions with a smaller alpha are skipped (they do not touch the transmittance).
+pub const ALPHA_MIN: f32 = 1.0 / 255.0;
+/// Most (tile, Gaussian) pairs binned in one render (4 bytes each).
+pub const MAX_TILE_PAIRS: usize = 1 << 30;
+/// A pixel stops once blending the next Gaussian would leave less transmittance than this.
+pub const T_MIN: f32 = 1e-4;
+
+/// Everything that can be wrong with a render request.
+#[derive(Debug, thiserror::Error)]
+pub enum RasterError {
+    /// A camera field is degenerate; `field` names it.
+    #[error("camera {field}: {reason}")]
+    InvalidCamera { field: &'static str, reason: String },
+    /// An input array has the wrong length for the number of Gaussians.
+    #[error("{name}: expected {expected} values, got {got}")]
+    LengthMismatch { name: &'static str, expected: usize, got: usize },
+    /// `sh_coeffs` is not (d+1)² for a degree d in 0..=3.
+    #[error("sh: {0} coefficients per channel is not (d+1)^2 for a degree d in 0..=3")]
+    UnsupportedShDegree(usize),
+    /// The footprints cover more (tile, Gaussian) pairs than we are willing to allocate.
+    #[error("{0} (tile, Gaussian) pairs exceed the limit of {max}; render a smaller image or fewer huge Gaussians", max = MAX_TILE_PAIRS)]
+    TooManyTilePairs(usize),
+    /// More Gaussians than a 32-bit index can name.
+    #[error("too many Gaussians ({0}); at most {max} are supported", max = u32::MAX)]
+    TooManyGaussians(usize),
+}
+
+/// The Gaussians to render, as borrowed slices (activated values, see DESIGN.md).
+#[derive(Clone, Copy, Debug)]
+pub struct Splats<'a> {
+    /// (N) centres in world units.
+    pub means: &'a [Vec3],
+    /// (N) standard deviations along the local axes, linear.
+    pub scales: &'a [Vec3],
+    /// (N) rotations `[w, x, y, z]`; normalised here (a zero quaternion acts as the identity).
+    pub quats: &'a [[f32; 4]],
+    /// (N) opacities in [0, 1].
+    pub opacities: &'a [f32],
+    /// (N * sh_coeffs * 3) SH coefficients laid out `[gaussian][coefficient][rgb]`; coefficient 0 is DC.
+    pub sh: &'a [f32],
+    /// Coefficients per channel K = (d+1)², d in 0..=3.
+    pub sh_coeffs: usize,
+}
+
+impl<'a> Splats<'a> {
+    /// Views flat row-major arrays (means and scales N*3, quats N*4, sh N*K*3) as [`Splats`].
+    pub fn from_flat(
+        means: &'a [f32],
+        scales: &'a [f32],
+        quats: &'a [f32],
+        opacities: &'a [f32],
+        sh: &'a [f32],
+        sh_coeffs: usize,
+    ) -> Result<Self, RasterError> {
+        // The slices are f32-aligned and Vec3/[f32; 4] need no more, so only a length that is
+        // not a whole number of rows can fail.
+        let whole_rows = |name: &'static str, width: usize, len: usize| RasterError::LengthMismatch {
+            name,
+            expected: len / width * width,
+            got: len,
+        };
+        let splats = Self {
+            means: bytemuck::try_cast_slice(means).map_err(|_| whole_rows("means", 3, means.len()))?,
+            scales: bytemuck::try_cast_slice(scales).map_err(|_| whole_rows("scales", 3, scales.len()))?,
+            quats: bytemuck::try_cast_slice(quats).map_err(|_| whole_rows("quats", 4, quats.len()))?,
+            opacities,
+            sh,
+            sh_coeffs,
+        };
+        splats.validate()?;
+        Ok(splats)
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// Whether there are no Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Checks that every slice matches the number of Gaussians and that K is supported.
+    pub fn validate(&self) -> Result<(), RasterError> {
+        let n = self.len();
+        if u32::try_from(n).is_err() {
+            return Err(RasterError::TooManyGaussians(n));
+        }
+        if ![1, 4, 9, 16].contains(&self.sh_coeffs) {
+            return Err(RasterError::UnsupportedShDegree(self.sh_coeffs));
+        }
+        let lengths = [
+            ("scales", self.scales.len(), n),
+            ("quats", self.quats.len(), n),
+            ("opacities", self.opacities.len(), n),
+            ("sh", self.sh.len(), n * self.sh_coeffs * 3),
+        ];
+        for (name, got, expected) in lengths {
+            if got != expected {
+                return Err(RasterError::LengthMismatch { name, expected, got });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Which outputs to compute.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RenderMode {
+    /// rgb, alpha, expected depth, index and index depth.
+    #[default]
+    Full,
+    /// Only the index image and its depth (no SH evaluation, no colour or depth accumulation).
+    IndexOnly,
+}
+
+/// Render settings.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderOptions {
+    /// Colour added behind everything as `T_final * background` (default black).
+    pub background: [f32; 3],
+    /// Which outputs to compute (default all).
+    pub mode: RenderMode,
+}
+
+/// Wall-clock seconds spent in each stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimings {
+    /// Projection, covariance, SH colour and footprint of every Gaussian.
+    pub project_s: f64,
+    /// Depth sort of the visible Gaussians and binning into tiles.
+    pub sort_s: f64,
+    /// Per-tile front-to-back blending into the output images.
+    pub composite_s: f64,
+}
+
+/// A rendered image set. Images are row-major `[row][col]`; the colour-mode outputs are empty in
+/// [`RenderMode::IndexOnly`].
+#[derive(Clone, Debug, Default)]
+pub struct RenderOutput {
+    pub width: usize,
+    pub height: usize,
+    /// (H * W * 3) colour, not clamped (SH colours may exceed 1).
+    pub rgb: Vec<f32>,
+    /// (H * W) accumulated opacity `1 - T_final`.
+    pub alpha: Vec<f32>,
+    /// (H * W) expected camera z, `sum(w_i z_i) / alpha` (0 where nothing contributes).
+    pub depth: Vec<f32>,
+    /// (H * W) index of the Gaussian with the largest `alpha_i * T_i`, -1 where none.
+    pub index: Vec<i32>,
+    /// (H * W) camera z of that Gaussian (0 where none).
+    pub index_depth: Vec<f32>,
+    /// Gaussians that survived culling.
+    pub n_visible: usize,
+    /// (tile, Gaussian) pairs blended over.
+    pub n_tile_pairs: usize,
+    pub timings: StageTimings,
+}
+
+/// Renders `splats` for `camera`.
+///
+/// Returns an error for a degenerate camera or inconsistent inputs; an empty scene, or one
+/// entirely behind the camera, renders as the background with index -1 everywhere.
+pub fn rasterize(splats: &Splats, camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, RasterError> {
+    camera.validate()?;
+    splats.validate()?;
+    let with_color = options.mode == RenderMode::Full;
+
+    let start = Instant::now();
+    let (projected, rects) = project::project(splats, camera, with_color);
+    let projected_at = Instant::now();
+    let order = bin::sort_by_depth(&projected, &rects);
+    let n_pairs: usize = order.iter().map(|&i| rects.get(i as usize).map_or(0, |r| r.area())).sum();
+    if n_pairs > MAX_TILE_PAIRS {
+        return Err(RasterError::TooManyTilePairs(n_pairs));
+    }
+    let bins = bin::TileBins::new(camera, &rects, &order);
+    drop(rects);
+    let sorted_at = Instant::now();
+    let mut out = composite::composite(camera, &projected, &bins, options);
+    let end = Instant::now();
+
+    out.n_visible = order.len();
+    out.n_tile_pairs = bins.len();
+    out.timings = StageTimings {
+        project_s: (projected_at - start).as_secs_f64(),
+        sort_s: (sorted_at - projected_at).as_secs_f64(),
+        composite_s: (end - sorted_at).as_secs_f64(),
+    };
+    Ok(out)
+}

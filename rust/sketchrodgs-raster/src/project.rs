@@ -1,0 +1,299 @@
+//! Per-Gaussian projection (INRIA `preprocessCUDA`): view transform, near-plane cull, EWA 2D
+//! covariance with the low-pass, conic, 3-sigma radius and tile rectangle, and SH colour.
+
+use glam::{Mat3, Quat, Vec3};
+use rayon::prelude::*;
+
+use crate::camera::{Camera, CameraF32};
+use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
+
+/// Gaussians per rayon task in the per-Gaussian passes.
+pub(crate) const MIN_GAUSSIANS_PER_TASK: usize = 4096;
+
+/// What compositing needs of one projected Gaussian.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Splat2D {
+    /// Mean in INRIA pixel coordinates: `u - 0.5`, `v - 0.5` (pixel (i, j) is sampled at (i, j)).
+    pub mean: [f32; 2],
+    /// Inverse 2D covariance `(A, B, C)`: `power = -0.5 (A dx² + C dy²) - B dx dy`.
+    pub conic: [f32; 3],
+    pub opacity: f32,
+    /// View-dependent colour (zero in index-only mode).
+    pub color: [f32; 3],
+    /// Camera z of the centre.
+    pub depth: f32,
+    /// Below this `power`, `opacity * exp(power) < 1/255` for certain (with a 1e-3 margin for
+    /// rounding), so compositing can skip a group of pixels without evaluating `exp`.
+    pub power_floor: f32,
+    /// Inclusive pixel box `[x0, y0, x1, y1]`, clipped to the image, outside which alpha < 1/255
+    /// (pixels outside it would be skipped anyway, so compositing never visits them).
+    pub pixel_box: [u16; 4],
+}
+
+/// Half-open tile range `[x0, x1) x [y0, y1)` a Gaussian is binned into; empty for a culled
+/// Gaussian. (At most 1024 tiles a side, see `MAX_IMAGE_SIDE`.)
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TileRect {
+    pub x0: u16,
+    pub y0: u16,
+    pub x1: u16,
+    pub y1: u16,
+}
+
+impl TileRect {
+    pub fn is_empty(&self) -> bool {
+        self.x0 >= self.x1 || self.y0 >= self.y1
+    }
+
+    pub fn area(&self) -> usize {
+        if self.is_empty() { 0 } else { usize::from(self.x1 - self.x0) * usize::from(self.y1 - self.y0) }
+    }
+}
+
+/// Projects every Gaussian: entry i of both results is Gaussian i; a culled Gaussian gets an
+/// empty [`TileRect`] (and a default [`Splat2D`]).
+pub fn project(splats: &Splats, camera: &Camera, with_color: bool) -> (Vec<Splat2D>, Vec<TileRect>) {
+    let cam = CameraF32::new(camera);
+    let k = splats.sh_coeffs;
+    let (mut projected, mut rects) = (Vec::new(), Vec::new());
+    (0..splats.len())
+        .into_par_iter()
+        .with_min_len(MIN_GAUSSIANS_PER_TASK)
+        .map(|i| {
+            let sh = if with_color { splats.sh.get(i * k * 3..(i + 1) * k * 3) } else { None };
+            project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, &cam, camera)
+                .unwrap_or_default()
+        })
+        .unzip_into_vecs(&mut projected, &mut rects);
+    (projected, rects)
+}
+
+/// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted.
+pub(crate) fn project_one(
+    mean: Vec3,
+    scale: Vec3,
+    quat: [f32; 4],
+    opacity: f32,
+    sh: Option<&[f32]>,
+    cam: &CameraF32,
+    camera: &Camera,
+) -> Option<(Splat2D, TileRect)> {
+    // alpha = min(0.99, opacity * exp(power)) <= opacity: such a Gaussian is skipped everywhere.
+    if opacity.is_nan() || opacity < ALPHA_MIN {
+        return None;
+    }
+    let p = cam.rotation * mean + cam.translation;
+    if p.z.is_nan() || p.z <= NEAR_PLANE {
+        return None;
+    }
+    let (x, y, z) = (p.x, p.y, p.z);
+    let inv_z = 1.0 / z;
+
+    // EWA Jacobian at the mean, with x/z and y/z clamped (for J only) as the reference does.
+    let tx = z * (x * inv_z).clamp(-cam.lim_x_neg, cam.lim_x_pos);
+    let ty = z * (y * inv_z).clamp(-cam.lim_y_neg, cam.lim_y_pos);
+    let j0 = Vec3::new(cam.fx * inv_z, 0.0, -cam.fx * tx * inv_z * inv_z);
+    let j1 = Vec3::new(0.0, cam.fy * inv_z, -cam.fy * ty * inv_z * inv_z);
+    // Rows of T = J W; Σ2D = T R S Sᵀ Rᵀ Tᵀ = (T R S)(T R S)ᵀ.
+    let rot_t = rotation(quat).transpose() * cam.rotation.transpose();
+    let m0 = scale * (rot_t * j0);
+    let m1 = scale * (rot_t * j1);
+    let a = m0.dot(m0) + LOW_PASS;
+    let b = m0.dot(m1);
+    let c = m1.dot(m1) + LOW_PASS;
+    // det(G + εI) = |m0 × m1|² + ε tr(G) + ε², free of the cancellation in a·c - b².
+    let det = m0.cross(m1).length_squared() + LOW_PASS * (a + c - 2.0 * LOW_PASS) + LOW_PASS * LOW_PASS;
+    if !(det > 0.0 && det.is_finite()) {
+        return None;
+    }
+    let inv_det = 1.0 / det;
+    let conic = [c * inv_det, -b * inv_det, a * inv_det];
+
+    let mid = 0.5 * (a + c);
+    let half_diff = 0.5 * (a - c);
+    let lambda1 = mid + (half_diff * half_diff + b * b).max(0.1).sqrt(); // mid² - det, exactly
+    let radius = ceil(SIGMA_EXTENT * lambda1.sqrt());
+
+    let u = cam.fx * x * inv_z + cam.cx;
+    let v = cam.fy * y * inv_z + cam.cy;
+    let mean2d = [u - 0.5, v - 0.5];
+    if !(mean2d[0].is_finite() && mean2d[1].is_finite() && radius.is_finite()) {
+        return None;
+    }
+    let (grid_x, grid_y) = camera.tile_grid();
+    let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
+    // INRIA getRect: C truncation toward zero, then clamp to the grid.
+    let trunc_clamp = |t: f32, max: u32| (t as i32).clamp(0, max as i32) as u16;
+    let mut rect = TileRect {
+        x0: trunc_clamp((mean2d[0] - radius) * tile_scale, grid_x),
+        y0: trunc_clamp((mean2d[1] - radius) * tile_scale, grid_y),
+        x1: trunc_clamp((mean2d[0] + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_x),
+        y1: trunc_clamp((mean2d[1] + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_y),
+    };
+    if rect.is_empty() {
+        return None;
+    }
+
+    // Pixels where opacity * exp(-q/2) >= 1/255 satisfy q <= tau; on that ellipse |dx| reaches
+    // sqrt(tau Σxx). The margin keeps rounding from dropping a boundary pixel.
+    let tau = 2.0 * (opacity / ALPHA_MIN).ln();
+    let reach = |var: f32| (tau * var).sqrt() * (1.0 + 1e-3) + 0.05;
+    let (reach_x, reach_y) = (reach(a), reach(c));
+    // Inclusive pixel range [ceil(m - r), floor(m + r)] clipped to [0, side - 1].
+    let span = |m: f32, r: f32, side: u32| (ceil(m - r).max(0.0) as i32, floor(m + r).min((side - 1) as f32) as i32);
+    let (bx0, bx1) = span(mean2d[0], reach_x, camera.width);
+    let (by0, by1) = span(mean2d[1], reach_y, camera.height);
+    if bx0 > bx1 || by0 > by1 {
+        return None;
+    }
+    let pixel_box = [bx0 as u16, by0 as u16, bx1 as u16, by1 as u16];
+    // Tiles holding no pixel of the box would only skip this Gaussian: leave them out.
+    let tile = TILE_SIZE as u16;
+    rect.x0 = rect.x0.max(pixel_box[0] / tile);
+    rect.y0 = rect.y0.max(pixel_box[1] / tile);
+    rect.x1 = rect.x1.min(pixel_box[2] / tile + 1);
+    rect.y1 = rect.y1.min(pixel_box[3] / tile + 1);
+    if rect.is_empty() {
+        return None;
+    }
+
+    let color = match sh {
+        Some(coeffs) => sh_to_color(coeffs, (mean - cam.center).normalize_or_zero()),
+        None => [0.0; 3],
+    };
+    let power_floor = -0.5 * tau - 1e-3;
+    let splat = Splat2D { mean: mean2d, conic, opacity, color, depth: z, power_floor, pixel_box };
+    Some((splat, rect))
+}
+
+/// Pixel coordinates are clamped to ±this before rounding: far beyond any image, and small
+/// enough for the i32 round trip below.
+const FAR: f32 = 1e9;
+
+/// `ceil` without a libm call (SSE2 has no rounding instruction); exact for |x| <= FAR, and
+/// only ever used where the result is then clipped to the image.
+#[inline(always)]
+fn ceil(x: f32) -> f32 {
+    let x = x.clamp(-FAR, FAR);
+    let t = x as i32 as f32; // toward zero
+    if t < x { t + 1.0 } else { t }
+}
+
+/// `floor` without a libm call; exact for |x| <= FAR.
+#[inline(always)]
+fn floor(x: f32) -> f32 {
+    let x = x.clamp(-FAR, FAR);
+    let t = x as i32 as f32;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// Rotation matrix of `[w, x, y, z]`, normalised by `max(|q|, 1e-12)` as the reference does.
+pub fn rotation(q: [f32; 4]) -> Mat3 {
+    let [w, x, y, z] = q;
+    let inv_norm = 1.0 / (w * w + x * x + y * y + z * z).sqrt().max(1e-12);
+    Mat3::from_quat(Quat::from_xyzw(x * inv_norm, y * inv_norm, z * inv_norm, w * inv_norm))
+}
+
+pub const SH_C0: f32 = 0.282_094_8;
+pub const SH_C1: f32 = 0.488_602_5;
+pub const SH_C2: [f32; 5] = [1.092_548_5, -1.092_548_5, 0.315_391_57, -1.092_548_5, 0.546_274_24];
+pub const SH_C3: [f32; 7] =
+    [-0.590_043_6, 2.890_611_4, -0.457_045_8, 0.373_176_33, -0.457_045_8, 1.445_305_7, -0.590_043_6];
+
+/// Colour of SH coefficients `sh` (K RGB triples, K in 1, 4, 9, 16) seen along the unit world
+/// direction `dir` from the camera to the Gaussian (`computeColorFromSH`); clamped at 0 only.
+pub fn sh_to_color(sh: &[f32], dir: Vec3) -> [f32; 3] {
+    let k = sh.len() / 3;
+    let (x, y, z) = (dir.x, dir.y, dir.z);
+    let mut basis = [0.0f32; 16];
+    basis[0] = SH_C0;
+    if k >= 4 {
+        basis[1] = -SH_C1 * y;
+        basis[2] = SH_C1 * z;
+        basis[3] = -SH_C1 * x;
+    }
+    if k >= 9 {
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        basis[4] = SH_C2[0] * x * y;
+        basis[5] = SH_C2[1] * y * z;
+        basis[6] = SH_C2[2] * (2.0 * zz - xx - yy);
+        basis[7] = SH_C2[3] * x * z;
+        basis[8] = SH_C2[4] * (xx - yy);
+        if k >= 16 {
+            basis[9] = SH_C3[0] * y * (3.0 * xx - yy);
+            basis[10] = SH_C3[1] * x * y * z;
+            basis[11] = SH_C3[2] * y * (4.0 * zz - xx - yy);
+            basis[12] = SH_C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+            basis[13] = SH_C3[4] * x * (4.0 * zz - xx - yy);
+            basis[14] = SH_C3[5] * z * (xx - yy);
+            basis[15] = SH_C3[6] * x * (xx - 3.0 * yy);
+        }
+    }
+    let mut rgb = [0.5f32; 3];
+    for (coeff, b) in sh.chunks_exact(3).zip(basis) {
+        for (out, c) in rgb.iter_mut().zip(coeff) {
+            *out += b * c;
+        }
+    }
+    rgb.map(|c| c.max(0.0))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_matches_the_reference_matrix() {
+        // RASTER.md 2: R[1][0] = 2(xy + wz) for a unit (w, x, y, z).
+        let (w, x, y, z) = (0.5f32, 0.5f32, -0.5f32, 0.5f32);
+        let r = rotation([w, x, y, z]);
+        let expected = [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        ];
+        for (i, row) in expected.iter().enumerate() {
+            for (j, e) in row.iter().enumerate() {
+                assert!((r.col(j)[i] - e).abs() < 1e-6, "R[{i}][{j}]");
+            }
+        }
+        // Unnormalised input is normalised; a zero quaternion is the identity.
+        assert!((rotation([2.0, 0.0, 0.0, 0.0]) - Mat3::IDENTITY).abs_diff_eq(Mat3::ZERO, 1e-6));
+        assert!((rotation([0.0; 4]) - Mat3::IDENTITY).abs_diff_eq(Mat3::ZERO, 1e-6));
+    }
+
+    #[test]
+    fn sh_bands_use_the_reference_signs() {
+        // One channel per band term: put 1 in coefficient j of the red channel only.
+        let dir = Vec3::new(0.36, -0.48, 0.8); // unit
+        let (x, y, z) = (dir.x, dir.y, dir.z);
+        let expected_basis = [
+            SH_C0,
+            -SH_C1 * y,
+            SH_C1 * z,
+            -SH_C1 * x,
+            SH_C2[0] * x * y,
+            SH_C2[1] * y * z,
+            SH_C2[2] * (2.0 * z * z - x * x - y * y),
+            SH_C2[3] * x * z,
+            SH_C2[4] * (x * x - y * y),
+            SH_C3[0] * y * (3.0 * x * x - y * y),
+            SH_C3[1] * x * y * z,
+            SH_C3[2] * y * (4.0 * z * z - x * x - y * y),
+            SH_C3[3] * z * (2.0 * z * z - 3.0 * x * x - 3.0 * y * y),
+            SH_C3[4] * x * (4.0 * z * z - x * x - y * y),
+            SH_C3[5] * z * (x * x - y * y),
+            SH_C3[6] * x * (x * x - 3.0 * y * y),
+        ];
+        for (j, b) in expected_basis.iter().enumerate() {
+            let mut sh = [0.0f32; 48];
+            sh[3 * j] = 1.0;
+            sh[3 * j + 1] = -1.0;
+            let rgb = sh_to_color(&sh, dir);
+            assert!((rgb[0] - (0.5 + b).max(0.0)).abs() < 1e-6, "basis {j}");
+            assert!((rgb[1] - (0.5 - b).max(0.0)).abs() < 1e-6, "basis {j}");
+            assert_eq!(rgb[2], 0.5);
+        }
+    }
+}

@@ -1,0 +1,408 @@
+//! Four f32 lanes: SSE2 on x86_64 (part of its baseline, so always there), plain arrays
+//! elsewhere. Both give bit-identical results: every operation is a single IEEE operation per
+//! lane in the same order, and nothing is fused.
+
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::{
+    __m128, __m128i, _mm_add_epi32, _mm_add_ps, _mm_and_ps, _mm_andnot_ps, _mm_castps_si128, _mm_castsi128_ps,
+    _mm_cmpge_ps, _mm_cmpgt_ps, _mm_cmple_ps, _mm_cmplt_ps, _mm_max_ps, _mm_min_ps, _mm_movemask_ps, _mm_mul_ps,
+    _mm_or_ps, _mm_set1_epi32, _mm_set1_ps, _mm_slli_epi32, _mm_sub_epi32, _mm_sub_ps,
+};
+
+/// Four f32 lanes.
+#[derive(Clone, Copy, Debug)]
+pub struct F32x4(#[cfg(target_arch = "x86_64")] __m128, #[cfg(not(target_arch = "x86_64"))] [f32; 4]);
+
+/// A per-lane mask (all bits set or clear), as produced by the comparisons.
+#[derive(Clone, Copy, Debug)]
+pub struct Mask4(F32x4);
+
+#[cfg(not(target_arch = "x86_64"))]
+use portable as imp;
+#[cfg(target_arch = "x86_64")]
+use sse as imp;
+
+#[cfg(target_arch = "x86_64")]
+mod sse {
+    //! Every `unsafe` here only calls an SSE/SSE2 intrinsic; SSE2 is part of the x86_64
+    //! baseline, so the instructions always exist.
+    use super::*;
+
+    #[inline(always)]
+    pub fn splat(v: f32) -> __m128 {
+        unsafe { _mm_set1_ps(v) }
+    }
+    #[inline(always)]
+    pub fn from_array(a: [f32; 4]) -> __m128 {
+        bytemuck::cast(a)
+    }
+    #[inline(always)]
+    pub fn to_array(v: __m128) -> [f32; 4] {
+        bytemuck::cast(v)
+    }
+    #[inline(always)]
+    pub fn from_bits(a: [u32; 4]) -> __m128 {
+        bytemuck::cast(a)
+    }
+    #[inline(always)]
+    pub fn to_bits(v: __m128) -> [u32; 4] {
+        bytemuck::cast(v)
+    }
+    #[inline(always)]
+    pub fn add(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_add_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn sub(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_sub_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn mul(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_mul_ps(a, b) }
+    }
+    /// `b` where `a` or `b` is NaN, like `minps`.
+    #[inline(always)]
+    pub fn min(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_min_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn max(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_max_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn lt(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_cmplt_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn le(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_cmple_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn ge(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_cmpge_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn gt(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_cmpgt_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn and(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_and_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn and_not(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_andnot_ps(a, b) } // !a & b
+    }
+    #[inline(always)]
+    pub fn or(a: __m128, b: __m128) -> __m128 {
+        unsafe { _mm_or_ps(a, b) }
+    }
+    #[inline(always)]
+    pub fn bits(mask: __m128) -> u32 {
+        unsafe { _mm_movemask_ps(mask) as u32 }
+    }
+    /// `2^k` for the integers `k` held in the low mantissa bits of `shifted` (see `exp`).
+    #[inline(always)]
+    pub fn pow2_from_rounded(shifted: __m128, round_bits: u32) -> __m128 {
+        // SAFETY: SSE2 is part of the x86_64 baseline, so these instructions always exist.
+        let k: __m128i = unsafe { _mm_sub_epi32(_mm_castps_si128(shifted), _mm_set1_epi32(round_bits as i32)) };
+        unsafe { _mm_castsi128_ps(_mm_slli_epi32::<23>(_mm_add_epi32(k, _mm_set1_epi32(127)))) }
+    }
+}
+
+/// The same operations on plain arrays (compiled on x86_64 too, for the test that both agree).
+#[cfg(any(not(target_arch = "x86_64"), test))]
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+mod portable {
+    type V = [f32; 4];
+    #[inline(always)]
+    fn zip(a: V, b: V, f: impl Fn(f32, f32) -> f32) -> V {
+        [f(a[0], b[0]), f(a[1], b[1]), f(a[2], b[2]), f(a[3], b[3])]
+    }
+    #[inline(always)]
+    fn mask(c: bool) -> f32 {
+        f32::from_bits(if c { u32::MAX } else { 0 })
+    }
+    #[inline(always)]
+    fn bitwise(a: V, b: V, f: impl Fn(u32, u32) -> u32) -> V {
+        zip(a, b, |x, y| f32::from_bits(f(x.to_bits(), y.to_bits())))
+    }
+    pub fn splat(v: f32) -> V {
+        [v; 4]
+    }
+    pub fn from_array(a: V) -> V {
+        a
+    }
+    pub fn to_array(v: V) -> V {
+        v
+    }
+    pub fn from_bits(a: [u32; 4]) -> V {
+        a.map(f32::from_bits)
+    }
+    pub fn to_bits(v: V) -> [u32; 4] {
+        v.map(f32::to_bits)
+    }
+    pub fn add(a: V, b: V) -> V {
+        zip(a, b, |x, y| x + y)
+    }
+    pub fn sub(a: V, b: V) -> V {
+        zip(a, b, |x, y| x - y)
+    }
+    pub fn mul(a: V, b: V) -> V {
+        zip(a, b, |x, y| x * y)
+    }
+    pub fn min(a: V, b: V) -> V {
+        zip(a, b, |x, y| if x < y { x } else { y })
+    }
+    pub fn max(a: V, b: V) -> V {
+        zip(a, b, |x, y| if x > y { x } else { y })
+    }
+    pub fn lt(a: V, b: V) -> V {
+        zip(a, b, |x, y| mask(x < y))
+    }
+    pub fn le(a: V, b: V) -> V {
+        zip(a, b, |x, y| mask(x <= y))
+    }
+    pub fn ge(a: V, b: V) -> V {
+        zip(a, b, |x, y| mask(x >= y))
+    }
+    pub fn gt(a: V, b: V) -> V {
+        zip(a, b, |x, y| mask(x > y))
+    }
+    pub fn and(a: V, b: V) -> V {
+        bitwise(a, b, |x, y| x & y)
+    }
+    pub fn and_not(a: V, b: V) -> V {
+        bitwise(a, b, |x, y| !x & y)
+    }
+    pub fn or(a: V, b: V) -> V {
+        bitwise(a, b, |x, y| x | y)
+    }
+    pub fn bits(mask: V) -> u32 {
+        (0..4).map(|i| (mask[i].to_bits() >> 31) << i).sum()
+    }
+    pub fn pow2_from_rounded(shifted: V, round_bits: u32) -> V {
+        shifted.map(|s| f32::from_bits(s.to_bits().wrapping_sub(round_bits).wrapping_add(127) << 23))
+    }
+}
+
+impl F32x4 {
+    #[inline(always)]
+    pub fn splat(v: f32) -> Self {
+        Self(imp::splat(v))
+    }
+    #[inline(always)]
+    pub fn from_array(a: [f32; 4]) -> Self {
+        Self(imp::from_array(a))
+    }
+    #[inline(always)]
+    pub fn to_array(self) -> [f32; 4] {
+        imp::to_array(self.0)
+    }
+    /// Reinterprets four u32 as lanes (for selecting integers with a mask).
+    #[inline(always)]
+    pub fn from_bits(a: [u32; 4]) -> Self {
+        Self(imp::from_bits(a))
+    }
+    #[inline(always)]
+    pub fn to_bits(self) -> [u32; 4] {
+        imp::to_bits(self.0)
+    }
+    /// Lane-wise minimum; `other` where `self` is NaN.
+    #[inline(always)]
+    pub fn min(self, other: Self) -> Self {
+        Self(imp::min(self.0, other.0))
+    }
+    /// Lane-wise maximum; `other` where `self` is NaN.
+    #[inline(always)]
+    pub fn max(self, other: Self) -> Self {
+        Self(imp::max(self.0, other.0))
+    }
+    #[inline(always)]
+    pub fn lt(self, other: Self) -> Mask4 {
+        Mask4(Self(imp::lt(self.0, other.0)))
+    }
+    #[inline(always)]
+    pub fn le(self, other: Self) -> Mask4 {
+        Mask4(Self(imp::le(self.0, other.0)))
+    }
+    #[inline(always)]
+    pub fn ge(self, other: Self) -> Mask4 {
+        Mask4(Self(imp::ge(self.0, other.0)))
+    }
+    #[inline(always)]
+    pub fn gt(self, other: Self) -> Mask4 {
+        Mask4(Self(imp::gt(self.0, other.0)))
+    }
+
+    /// `exp(x)` for `x <= 0` (Cody-Waite reduction and the Cephes `expf` polynomial; relative
+    /// error below 4e-7). Inputs below -80 give about 2e-35, far below any alpha that counts.
+    #[inline(always)]
+    pub fn exp_nonpositive(self) -> Self {
+        const LOG2E: f32 = std::f32::consts::LOG2_E;
+        const LN2_HI: f32 = 0.693_359_4;
+        const LN2_LO: f32 = -2.121_944_4e-4;
+        // Adding 1.5 * 2^23 rounds to an integer, which then sits in the low mantissa bits.
+        const ROUND: f32 = 12_582_912.0;
+        const POLY: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 0.5];
+        let s = Self::splat;
+        let x = self.max(s(-80.0)).min(s(0.0));
+        let shifted = x * s(LOG2E) + s(ROUND);
+        let n = shifted - s(ROUND);
+        let r = x - n * s(LN2_HI) - n * s(LN2_LO);
+        let mut p = s(POLY[0]);
+        for c in &POLY[1..] {
+            p = p * r + s(*c);
+        }
+        let e_r = p * r * r + r + s(1.0);
+        e_r * Self(imp::pow2_from_rounded(shifted.0, ROUND.to_bits()))
+    }
+}
+
+impl std::ops::Add for F32x4 {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, other: Self) -> Self {
+        Self(imp::add(self.0, other.0))
+    }
+}
+
+impl std::ops::Sub for F32x4 {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, other: Self) -> Self {
+        Self(imp::sub(self.0, other.0))
+    }
+}
+
+impl std::ops::Mul for F32x4 {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, other: Self) -> Self {
+        Self(imp::mul(self.0, other.0))
+    }
+}
+
+impl Mask4 {
+    /// Lanes whose bit is set in `bits` (bit i = lane i).
+    #[inline(always)]
+    pub fn from_bits(bits: u32) -> Self {
+        let lane = |i: u32| if bits >> i & 1 == 1 { u32::MAX } else { 0 };
+        Self(F32x4::from_bits([lane(0), lane(1), lane(2), lane(3)]))
+    }
+    /// Bit i set where lane i is.
+    #[inline(always)]
+    pub fn bits(self) -> u32 {
+        imp::bits(self.0.0)
+    }
+    #[inline(always)]
+    pub fn and(self, other: Self) -> Self {
+        Self(F32x4(imp::and(self.0.0, other.0.0)))
+    }
+    /// `self & !other`.
+    #[inline(always)]
+    pub fn and_not(self, other: Self) -> Self {
+        Self(F32x4(imp::and_not(other.0.0, self.0.0)))
+    }
+    /// `a` where set, `b` elsewhere.
+    #[inline(always)]
+    pub fn select(self, a: F32x4, b: F32x4) -> F32x4 {
+        F32x4(imp::or(imp::and(self.0.0, a.0), imp::and_not(self.0.0, b.0)))
+    }
+    /// `a` where set, zero elsewhere.
+    #[inline(always)]
+    pub fn keep(self, a: F32x4) -> F32x4 {
+        F32x4(imp::and(self.0.0, a.0))
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exp_matches_std_to_a_few_ulp() {
+        let mut worst = 0.0f32;
+        let mut x = 0.0f32;
+        while x > -80.0 {
+            let fast = F32x4::from_array([x, x * 0.5, x * 0.25, x * 0.125]).exp_nonpositive().to_array();
+            for (f, v) in fast.iter().zip([x, x * 0.5, x * 0.25, x * 0.125]) {
+                worst = worst.max((f - v.exp()).abs() / v.exp());
+            }
+            x -= 0.000_731;
+        }
+        assert!(worst < 4e-7, "worst relative error {worst}");
+        let edge = F32x4::from_array([0.0, -1e30, f32::NEG_INFINITY, -80.0]).exp_nonpositive().to_array();
+        assert_eq!(edge[0], 1.0);
+        assert!(edge[1] < 1e-30 && edge[2] < 1e-30 && edge[3] < 1e-30);
+    }
+
+    /// The portable lanes give the SSE results bit for bit, NaN and infinities included.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn portable_lanes_match_sse_bit_for_bit() {
+        let specials = [0.0, -0.0, 1.0, -1.5, 1e-40, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 3.4e38, -87.3];
+        let mut values: Vec<f32> = specials.to_vec();
+        let mut state = 12345u32;
+        for _ in 0..400 {
+            state = state.wrapping_mul(1664525).wrapping_add(1013904223);
+            values.push(f32::from_bits(state) % 1e3);
+        }
+        let bits = |v: [f32; 4]| v.map(f32::to_bits);
+        for quad in values.chunks_exact(4).zip(values.chunks_exact(4).rev()) {
+            let a: [f32; 4] = quad.0.try_into().unwrap();
+            let b: [f32; 4] = quad.1.try_into().unwrap();
+            let (sa, sb) = (sse::from_array(a), sse::from_array(b));
+            type Pair = (fn(__m128, __m128) -> __m128, fn([f32; 4], [f32; 4]) -> [f32; 4]);
+            let pairs: [Pair; 11] = [
+                (sse::add, portable::add),
+                (sse::sub, portable::sub),
+                (sse::mul, portable::mul),
+                (sse::min, portable::min),
+                (sse::max, portable::max),
+                (sse::lt, portable::lt),
+                (sse::le, portable::le),
+                (sse::ge, portable::ge),
+                (sse::gt, portable::gt),
+                (sse::and, portable::and),
+                (sse::and_not, portable::and_not),
+            ];
+            for (fast, slow) in pairs {
+                assert_eq!(bits(sse::to_array(fast(sa, sb))), bits(slow(a, b)), "{a:?} {b:?}");
+            }
+            assert_eq!(bits(sse::to_array(sse::or(sa, sb))), bits(portable::or(a, b)));
+            assert_eq!(sse::bits(sse::lt(sa, sb)), portable::bits(portable::lt(a, b)));
+            let rounded = sse::add(
+                sse::mul(
+                    sse::min(sse::max(sa, sse::splat(-80.0)), sse::splat(0.0)),
+                    sse::splat(std::f32::consts::LOG2_E),
+                ),
+                sse::splat(12_582_912.0),
+            );
+            let round_bits = 12_582_912.0f32.to_bits();
+            assert_eq!(
+                bits(sse::to_array(sse::pow2_from_rounded(rounded, round_bits))),
+                bits(portable::pow2_from_rounded(sse::to_array(rounded), round_bits))
+            );
+        }
+    }
+
+    #[test]
+    fn masks_select_and_count_lanes() {
+        let a = F32x4::from_array([1.0, 2.0, 3.0, 4.0]);
+        let b = F32x4::splat(2.5);
+        let lt = a.lt(b);
+        assert_eq!(lt.bits(), 0b0011);
+        assert_eq!(a.ge(b).bits(), 0b1100);
+        assert_eq!(a.le(F32x4::splat(2.0)).bits(), 0b0011);
+        assert_eq!(a.gt(F32x4::splat(2.0)).bits(), 0b1100);
+        assert_eq!(lt.select(a, b).to_array(), [1.0, 2.0, 2.5, 2.5]);
+        assert_eq!(lt.keep(a).to_array(), [1.0, 2.0, 0.0, 0.0]);
+        assert_eq!(Mask4::from_bits(0b1010).bits(), 0b1010);
+        assert_eq!(Mask4::from_bits(0b0110).and(lt).bits(), 0b0010);
+        assert_eq!(Mask4::from_bits(0b0110).and_not(lt).bits(), 0b0100);
+        let ints = F32x4::from_bits([7, 8, 9, 10]);
+        assert_eq!(lt.select(ints, F32x4::from_bits([0; 4])).to_bits(), [7, 8, 0, 0]);
+    }
+}

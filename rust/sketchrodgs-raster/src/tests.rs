@@ -1,0 +1,201 @@
+//! Whole-pipeline tests; the per-module ones sit beside their code.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use glam::Vec3;
+
+use crate::bin::{TileBins, sort_by_depth};
+use crate::project::project;
+use crate::*;
+
+fn camera(width: u32, height: u32) -> Camera {
+    Camera {
+        width,
+        height,
+        fx: 100.0,
+        fy: 100.0,
+        cx: f64::from(width) / 2.0 + 0.5,
+        cy: f64::from(height) / 2.0 + 0.5,
+        world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+    }
+}
+
+/// Owned arrays behind a [`Splats`].
+struct Scene {
+    means: Vec<Vec3>,
+    scales: Vec<Vec3>,
+    quats: Vec<[f32; 4]>,
+    opacities: Vec<f32>,
+    sh: Vec<f32>,
+    k: usize,
+}
+
+impl Scene {
+    fn splats(&self) -> Splats<'_> {
+        Splats {
+            means: &self.means,
+            scales: &self.scales,
+            quats: &self.quats,
+            opacities: &self.opacities,
+            sh: &self.sh,
+            sh_coeffs: self.k,
+        }
+    }
+
+    /// `n` pseudo-random Gaussians in front of the camera (a fixed LCG, no dependency).
+    fn random(n: usize, k: usize, seed: u64) -> Self {
+        let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f32) / ((1u64 << 24) as f32)
+        };
+        let mut scene = Scene { means: vec![], scales: vec![], quats: vec![], opacities: vec![], sh: vec![], k };
+        for _ in 0..n {
+            scene.means.push(Vec3::new(next() * 2.0 - 1.0, next() * 2.0 - 1.0, 1.0 + 3.0 * next()));
+            scene.scales.push(Vec3::new(0.002 + 0.05 * next(), 0.002 + 0.05 * next(), 0.002 + 0.05 * next()));
+            scene.quats.push([next() - 0.5, next() - 0.5, next() - 0.5, next() - 0.5]);
+            scene.opacities.push(next());
+            scene.sh.extend((0..k * 3).map(|_| next() - 0.5));
+        }
+        scene
+    }
+}
+
+fn render(scene: &Scene, camera: &Camera) -> RenderOutput {
+    rasterize(&scene.splats(), camera, &RenderOptions::default()).unwrap()
+}
+
+#[test]
+fn output_is_identical_for_any_thread_count() {
+    let scene = Scene::random(20_000, 16, 1);
+    let cam = camera(200, 150);
+    let runs: Vec<RenderOutput> = [1, 2, 3, 8]
+        .iter()
+        .map(|&threads| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| render(&scene, &cam))
+        })
+        .collect();
+    assert!(runs[0].n_visible > 10_000);
+    for run in &runs[1..] {
+        assert_eq!(run.rgb, runs[0].rgb);
+        assert_eq!(run.alpha, runs[0].alpha);
+        assert_eq!(run.depth, runs[0].depth);
+        assert_eq!(run.index, runs[0].index);
+        assert_eq!(run.index_depth, runs[0].index_depth);
+    }
+}
+
+#[test]
+fn index_only_mode_skips_colour_but_keeps_the_index() {
+    let scene = Scene::random(5_000, 4, 2);
+    let cam = camera(96, 80);
+    let full = render(&scene, &cam);
+    let options = RenderOptions { mode: RenderMode::IndexOnly, ..RenderOptions::default() };
+    let fast = rasterize(&scene.splats(), &cam, &options).unwrap();
+    assert!(fast.rgb.is_empty() && fast.alpha.is_empty() && fast.depth.is_empty());
+    assert_eq!(fast.index, full.index);
+    assert_eq!(fast.index_depth, full.index_depth);
+}
+
+#[test]
+fn equal_depths_blend_in_ascending_index_order() {
+    // Two identical Gaussians at the same depth: the lower row is blended first, so it weighs
+    // alpha against the other's alpha (1 - alpha), and it is the one the index names.
+    let mut scene = Scene::random(2, 1, 3);
+    scene.means = vec![Vec3::new(0.0, 0.0, 2.0); 2];
+    scene.scales = vec![Vec3::splat(0.05); 2];
+    scene.quats = vec![[1.0, 0.0, 0.0, 0.0]; 2];
+    scene.opacities = vec![0.5; 2];
+    scene.sh = vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let cam = camera(32, 32);
+    let out = render(&scene, &cam);
+    let centre = 16 * 32 + 16;
+    assert_eq!(out.index[centre], 0);
+    // Colours: row 0 (0.5 + C0, 0.5, 0.5), row 1 (0.5, 0.5 + C0, 0.5); weights 0.5 and 0.25.
+    let c0 = 0.5 + project::SH_C0;
+    assert!((out.rgb[centre * 3] - (c0 * 0.5 + 0.5 * 0.25)).abs() < 1e-6);
+    assert!((out.rgb[centre * 3 + 1] - (0.5 * 0.5 + c0 * 0.25)).abs() < 1e-6);
+}
+
+#[test]
+fn tile_lists_hold_each_gaussian_in_its_rectangle_front_to_back() {
+    let scene = Scene::random(3_000, 1, 4);
+    let cam = camera(100, 70);
+    let (projected, rects) = project(&scene.splats(), &cam, true);
+    let order = sort_by_depth(&projected, &rects);
+    assert_eq!(order.len(), rects.iter().filter(|r| !r.is_empty()).count());
+    let bins = TileBins::new(&cam, &rects, &order);
+    assert_eq!(bins.len(), rects.iter().map(|r| r.area()).sum::<usize>());
+    let mut seen = vec![0usize; rects.len()];
+    for ty in 0..bins.grid_y as u16 {
+        for tx in 0..bins.grid_x as u16 {
+            let list: Vec<u32> =
+                bins.tile_lists(usize::from(ty) * bins.grid_x as usize + usize::from(tx)).flatten().copied().collect();
+            for pair in list.windows(2) {
+                let (a, b) = (projected[pair[0] as usize].depth, projected[pair[1] as usize].depth);
+                assert!(a < b || (a == b && pair[0] < pair[1]), "tile list out of order");
+            }
+            for &i in &list {
+                let r = rects[i as usize];
+                assert!(r.x0 <= tx && tx < r.x1 && r.y0 <= ty && ty < r.y1);
+                seen[i as usize] += 1;
+            }
+        }
+    }
+    for (i, r) in rects.iter().enumerate() {
+        assert_eq!(seen[i], r.area());
+    }
+}
+
+#[test]
+fn empty_and_unseen_scenes_render_the_background() {
+    let cam = camera(40, 30);
+    let options = RenderOptions { background: [0.25, 0.5, 1.0], mode: RenderMode::Full };
+    let empty = Scene::random(0, 1, 5);
+    let mut behind = Scene::random(100, 1, 6);
+    behind.means.iter_mut().for_each(|m| m.z = -m.z);
+    for scene in [&empty, &behind] {
+        let out = rasterize(&scene.splats(), &cam, &options).unwrap();
+        assert_eq!(out.n_visible, 0);
+        assert!(out.index.iter().all(|&i| i == -1));
+        assert!(out.alpha.iter().all(|&a| a == 0.0));
+        assert!(out.rgb.chunks_exact(3).all(|c| c == [0.25, 0.5, 1.0]));
+    }
+}
+
+#[test]
+fn inconsistent_inputs_are_errors() {
+    let scene = Scene::random(10, 4, 7);
+    let cam = camera(40, 30);
+    let mut splats = scene.splats();
+    splats.opacities = &scene.opacities[..9];
+    assert!(matches!(
+        rasterize(&splats, &cam, &RenderOptions::default()),
+        Err(RasterError::LengthMismatch { name: "opacities", .. })
+    ));
+    let mut splats = scene.splats();
+    splats.sh_coeffs = 5;
+    assert!(matches!(rasterize(&splats, &cam, &RenderOptions::default()), Err(RasterError::UnsupportedShDegree(5))));
+    let flat: Vec<f32> = vec![0.0; 10];
+    assert!(matches!(
+        Splats::from_flat(&flat, &flat, &flat, &flat, &flat, 1),
+        Err(RasterError::LengthMismatch { name: "means", .. })
+    ));
+    let mut bad = cam;
+    bad.fx = 0.0;
+    assert!(matches!(
+        rasterize(&scene.splats(), &bad, &RenderOptions::default()),
+        Err(RasterError::InvalidCamera { field: "fx", .. })
+    ));
+}
+
+#[test]
+fn huge_gaussians_covering_everything_are_fine() {
+    let mut scene = Scene::random(50, 1, 8);
+    scene.scales.iter_mut().for_each(|s| *s = Vec3::splat(1e3));
+    let out = render(&scene, &camera(64, 64));
+    assert_eq!(out.n_visible, 50);
+    assert!(out.index.iter().all(|&i| i >= 0));
+    assert!(out.rgb.iter().all(|c| c.is_finite()));
+}

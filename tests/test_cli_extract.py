@@ -1,0 +1,62 @@
+"""`sketchrodgs extract`: rod JSON and overlay from files, readable failures."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+
+from sketchrodgs import Camera, data, load_scene
+
+CAMERA = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=480, height=270, fov_y_deg=40)
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "sketchrodgs", *args], capture_output=True, text=True, timeout=120)
+
+
+def ring_stroke() -> list[list[float]]:
+    theta = np.radians(np.linspace(20, 160, 25))
+    uv, _ = CAMERA.project(np.stack([0.455 * np.cos(theta), 0.136 * np.sin(theta), 0 * theta], axis=1))
+    return uv.tolist()
+
+
+def test_extract_writes_rod_json_and_overlay(tmp_path):
+    CAMERA.save(tmp_path / "cam.json")
+    (tmp_path / "stroke.json").write_text(json.dumps({"points": ring_stroke()}))
+    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
+                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"), "--overlay", str(tmp_path / "o.png"))
+    assert result.returncode == 0, result.stderr
+    assert "stroke covered 100%" in result.stdout
+    rod = json.loads((tmp_path / "rod.json").read_text())
+    polyline = np.array(rod["polyline"])
+    assert polyline.shape[1] == 3 and len(polyline) >= 10
+    assert rod["radius"] > 0 and len(rod["gaussian_ids"]) > 1000 and len(rod["stroke"]) == 25
+    assert max(rod["gaussian_ids"]) < len(load_scene(data.sample("ring")))
+    overlay = np.asarray(Image.open(tmp_path / "o.png"))
+    assert overlay.shape == (270, 480, 3)
+    # the stroke (green) and the polyline (blue) are drawn
+    green = (overlay[..., 1] > 200) & (overlay[..., 0] < 100)
+    blue = (overlay[..., 2] > 200) & (overlay[..., 0] < 100) & (overlay[..., 1] < 200)
+    assert green.sum() > 100 and blue.sum() > 50
+
+
+def test_extract_on_background_fails_with_one_line(tmp_path):
+    CAMERA.save(tmp_path / "cam.json")
+    (tmp_path / "stroke.json").write_text(json.dumps({"points": [[5, 5], [60, 8], [120, 5]]}))
+    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
+                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"))
+    assert result.returncode == 1
+    assert len(result.stderr.strip().splitlines()) == 1 and "background" in result.stderr
+    assert not (tmp_path / "rod.json").exists()
+
+
+def test_extract_rejects_a_malformed_stroke_file(tmp_path):
+    CAMERA.save(tmp_path / "cam.json")
+    (tmp_path / "stroke.json").write_text(json.dumps({"points": [1, 2, 3]}))
+    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
+                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"))
+    assert result.returncode == 1 and "stroke.json" in result.stderr
