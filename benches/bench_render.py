@@ -30,7 +30,7 @@ REPEAT = 7
 
 
 def plant() -> tuple[GaussianScene, Camera]:
-    scene = sketchrodgs.load_scene(DATA / "plant.splat")
+    scene = sketchrodgs.load_scene(sketchrodgs.data.sample("plant"))
     camera = sketchrodgs.load_cameras(DATA / "cameras_plant.json")[0]
     return scene, camera
 

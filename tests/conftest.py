@@ -7,9 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sketchrodgs import GaussianScene
+from sketchrodgs import GaussianScene, data
 
 DATA = Path(__file__).parent / "data"
+# The real plant capture ships with the package (the demo uses it); tests read it from there.
+PLANT = data.sample("plant")
 
 
 def random_scene(n: int, sh_degree: int = 0, seed: int = 0) -> GaussianScene:

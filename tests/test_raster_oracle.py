@@ -11,13 +11,13 @@ import json
 
 import numpy as np
 import pytest
-from conftest import DATA
+from conftest import DATA, PLANT
 
 import sketchrodgs
 from sketchrodgs import Camera
 from sketchrodgs.render import render
 
-CASES = [("plant.splat", "oracle_plant_view0.npz"), ("torus_100k.splat", "oracle_torus_view1.npz")]
+CASES = [(PLANT, "oracle_plant_view0.npz"), (DATA / "torus_100k.splat", "oracle_torus_view1.npz")]
 
 
 @pytest.fixture(scope="module", params=CASES, ids=[c[1].removesuffix(".npz") for c in CASES])
@@ -26,7 +26,7 @@ def case(request):
     oracle = dict(np.load(DATA / oracle_file))
     settings = json.loads(str(oracle["settings_json"]))
     camera = Camera.from_dict(json.loads(str(oracle["camera_json"])))
-    scene = sketchrodgs.load_scene(DATA / scene_file)
+    scene = sketchrodgs.load_scene(scene_file)
     assert len(scene) == settings["n_gaussians"] and settings["bg"] == [0.0, 0.0, 0.0]
     return scene, camera, oracle, render(scene, camera)
 

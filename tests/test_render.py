@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import DATA, random_scene
+from conftest import DATA, PLANT, random_scene
 from reference.raster_reference import render_reference
 
 import sketchrodgs
@@ -344,7 +344,7 @@ def test_outputs_are_numpy_arrays_owned_by_rust():
 
 
 def plant_scene():
-    return sketchrodgs.load_scene(DATA / "plant.splat")
+    return sketchrodgs.load_scene(PLANT)
 
 
 def plant_camera(width=480, height=270):
@@ -488,7 +488,7 @@ def read_png(path) -> np.ndarray:
 
 def test_cli_renders_png_and_index(tmp_path):
     png, npz = tmp_path / "plant.png", tmp_path / "plant.npz"
-    out = run_cli(str(DATA / "plant.splat"), "--camera", str(DATA / "cameras_plant.json"), "--view", "view0_az30_el25",
+    out = run_cli(str(PLANT), "--camera", str(DATA / "cameras_plant.json"), "--view", "view0_az30_el25",
                   "--width", "240", "-o", str(png), "--index", str(npz), "--background", "1,1,1")  # fmt: skip
     assert out.returncode == 0, out.stderr
     assert "240x135" in out.stdout
@@ -514,7 +514,7 @@ def test_cli_reads_a_3dgs_cameras_json(tmp_path):
     cameras = tmp_path / "cameras.json"
     cameras.write_text(json.dumps([entry]))
     npz = tmp_path / "k.npz"
-    out = run_cli(str(DATA / "plant.splat"), "--camera", str(cameras), "--view", "frame_0", "--index", str(npz))
+    out = run_cli(str(PLANT), "--camera", str(cameras), "--view", "frame_0", "--index", str(npz))
     assert out.returncode == 0, out.stderr
     saved = np.load(npz)
     assert "alpha" not in saved  # index only: no colour was computed
@@ -522,11 +522,11 @@ def test_cli_reads_a_3dgs_cameras_json(tmp_path):
 
 
 def test_cli_errors_are_one_line(tmp_path):
-    base = [str(DATA / "plant.splat"), "--camera", str(DATA / "cameras_plant.json")]
+    base = [str(PLANT), "--camera", str(DATA / "cameras_plant.json")]
     for extra in (["--view", "7", "-o", str(tmp_path / "a.png")], ["--view", "nope", "-o", str(tmp_path / "a.png")], []):
         out = run_cli(*base, *extra)
         assert out.returncode == 1 and len(out.stderr.strip().splitlines()) == 1, out.stderr
-    out = run_cli(str(DATA / "plant.splat"), "--camera", str(tmp_path / "missing.json"), "-o", str(tmp_path / "a.png"))
+    out = run_cli(str(PLANT), "--camera", str(tmp_path / "missing.json"), "-o", str(tmp_path / "a.png"))
     assert out.returncode == 1 and "missing.json" in out.stderr
     assert run_cli(*base, "--width", "0", "-o", str(tmp_path / "a.png")).returncode == 2
     assert not (tmp_path / "a.png").exists()

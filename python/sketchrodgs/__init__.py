@@ -21,21 +21,27 @@ from .errors import (
 from .extract import Extraction, extract_rod
 from .io import load_scene, save_scene
 from .render import RenderResult, render
+from .rod import Rod, RodParams, World
 from .scene import GaussianScene
+from .skin import BoundRod, skin
 
 # A forked child has none of the worker threads of the parent's pool; it builds its own.
 os.register_at_fork(after_in_child=_core._reset_pool_after_fork)
 
 __all__ = [
+    "BoundRod",
     "Camera",
     "CameraError",
     "Extraction",
     "GaussianScene",
     "PathNotFoundError",
     "RenderResult",
+    "Rod",
+    "RodParams",
     "SceneFormatError",
     "SimulationError",
     "SketchRodGSError",
+    "World",
     "__version__",
     "data",
     "extract_rod",
@@ -43,4 +49,5 @@ __all__ = [
     "load_scene",
     "render",
     "save_scene",
+    "skin",
 ]

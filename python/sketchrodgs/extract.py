@@ -8,9 +8,11 @@ import json
 import os
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from . import _core
 from . import polyline as pl
 from .atomic import atomic_write_text
@@ -78,6 +80,71 @@ class Extraction:
     def save(self, path: str | os.PathLike[str], material: dict[str, Any] | None = None) -> None:
         """Write the rod JSON atomically."""
         atomic_write_text(path, json.dumps(self.to_json(material)) + "\n")
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any], source: str = "rod") -> Extraction:
+        """Rebuild from rod JSON (`to_json`); the pixel path is not stored and comes back empty."""
+        if not isinstance(data, dict):
+            raise SketchRodGSError(f"{source}: expected a JSON object")
+        missing = [k for k in ("polyline", "radius", "camera", "gaussian_ids", "binding") if k not in data]
+        if missing:
+            raise SketchRodGSError(f"{source}: missing field(s) {', '.join(missing)}")
+        polyline = _array(data["polyline"], np.float32, (None, 3), f"{source}: polyline")
+        if len(polyline) < 2:
+            raise SketchRodGSError(f"{source}: polyline: needs at least 2 vertices, got {len(polyline)}")
+        radius = data["radius"]
+        if not isinstance(radius, (int, float)) or not np.isfinite(radius) or radius <= 0:
+            raise SketchRodGSError(f"{source}: radius: must be a number > 0, got {radius!r}")
+        ids = _array(data["gaussian_ids"], np.int64, (None,), f"{source}: gaussian_ids")
+        binding = data["binding"] if isinstance(data["binding"], dict) else {}
+        g = len(ids)
+        segment = _array(binding.get("segment"), np.int32, (g,), f"{source}: binding.segment")
+        t = _array(binding.get("t"), np.float32, (g,), f"{source}: binding.t")
+        offset = _array(binding.get("offset"), np.float32, (g, 3), f"{source}: binding.offset")
+        if g and (segment.min() < 0 or segment.max() >= len(polyline) - 1):
+            raise SketchRodGSError(f"{source}: binding.segment: values must be in 0..{len(polyline) - 2}")
+        distance = np.linalg.norm(offset, axis=1).astype(np.float32)
+        return cls(
+            polyline=polyline,
+            radius=float(radius),
+            edge_length=float(data.get("edge_length", pl.polyline_length(polyline) / (len(polyline) - 1))),
+            pixel_path=[],
+            path_gaussian_ids=np.empty(0, np.int64),
+            gaussian_ids=ids,
+            binding=pl.Binding(ids, segment, t, offset, distance),
+            coverage=float(data.get("coverage", float("nan"))),
+            pieces_reached_goal=[],
+            camera=Camera.from_dict(data["camera"], f"{source}: camera"),
+            stroke=_array(data.get("stroke", np.empty((0, 2))), np.float32, (None, 2), f"{source}: stroke"),
+        )
+
+
+def load_rod(path: str | os.PathLike[str]) -> tuple[Extraction, dict[str, Any]]:
+    """Read a rod JSON file: the extraction and its stored material (may be empty)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise SketchRodGSError(f"{path}: cannot read ({exc.strerror})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SketchRodGSError(f"{path}: not valid JSON ({exc})") from None
+    extraction = Extraction.from_json(data, str(path))
+    material = data.get("material") or {}
+    if not isinstance(material, dict):
+        raise SketchRodGSError(f"{path}: material: expected an object")
+    return extraction, material
+
+
+def _array(value: Any, dtype: type, shape: tuple[int | None, ...], name: str) -> np.ndarray:
+    """`value` as a C-contiguous array of `shape` (None: any length) with finite entries."""
+    try:
+        array = np.ascontiguousarray(value, dtype=dtype)
+    except (TypeError, ValueError):
+        raise SketchRodGSError(f"{name}: expected an array of numbers") from None
+    if array.ndim != len(shape) or any(want is not None and got != want for got, want in zip(array.shape, shape)):
+        raise SketchRodGSError(f"{name}: expected shape {tuple('N' if s is None else s for s in shape)}, got {array.shape}")
+    if array.dtype.kind == "f" and not np.isfinite(array).all():
+        raise SketchRodGSError(f"{name}: contains NaN or infinite values")
+    return array
 
 
 def extract_rod(

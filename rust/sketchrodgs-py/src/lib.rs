@@ -12,6 +12,7 @@ mod polyline;
 mod pool;
 mod raster;
 mod rod;
+mod skin;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -22,5 +23,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     pool::register(m)?;
     raster::register(m)?;
     rod::register(m)?;
+    skin::register(m)?;
     Ok(())
 }

@@ -1,0 +1,100 @@
+"""Skinning and animation: skinning 100k and 1M bound Gaussians to a bent rod, and the `animate`
+pipeline (simulate, skin, render, write) for 60 frames of the real plant capture at 960x540."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from _table import best_time, print_table
+from scipy.spatial.transform import Rotation
+
+from sketchrodgs import data, extract_rod, load_scene
+from sketchrodgs.animate import Animation, Pull
+from sketchrodgs.images import save_png, to_uint8
+from sketchrodgs.render import render
+from sketchrodgs.rod import Rod
+from sketchrodgs.skin import BoundRod, skin_into
+
+
+
+def bent_rod(vertices: int = 200) -> Rod:
+    x = np.linspace(-0.5, 0.5, vertices)
+    rod = Rod(np.stack([x, 0 * x, 0 * x], axis=1), radius=0.01)
+    rod.clamp(0)
+    rod.clamp(-1)
+    rod.move_clamp(-1, Rotation.from_euler("z", 90, degrees=True).as_matrix(), (-0.36, 0.64, 0.0))
+    rod.solve_static()
+    return rod
+
+
+def numpy_reference(rest_points, rod_positions, rotations, bound):
+    """The obvious vectorised numpy version (for the ratio column)."""
+    s, t = bound.segment, bound.t[:, None].astype(np.float64)
+    r = Rotation.from_matrix(rotations)
+    q = r.as_quat()
+    qa, qb = q[s], q[s + 1]
+    qb = np.where(np.sum(qa * qb, axis=1, keepdims=True) < 0, -qb, qb)
+    blend = Rotation.from_quat((1 - t) * qa + t * qb)
+    point = (1 - t) * rod_positions[s] + t * rod_positions[s + 1]
+    return point + blend.apply(bound.offset)
+
+
+def skin_rows() -> list[list[object]]:
+    rod = bent_rod()
+    rows = []
+    for count in (100_000, 1_000_000):
+        rng = np.random.default_rng(0)
+        segment = rng.integers(0, rod.num_vertices - 1, count).astype(np.int32)
+        t = rng.uniform(0, 1, count).astype(np.float32)
+        offset = rng.normal(scale=0.01, size=(count, 3)).astype(np.float32)
+        quats = rng.normal(size=(count, 4)).astype(np.float32)
+        quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+        scene_means = rng.normal(size=(count, 3)).astype(np.float32)
+        bound = BoundRod(np.arange(count, dtype=np.int64), segment, t, offset, quats,
+                         np.tile(np.eye(3), (rod.num_vertices, 1, 1)))
+        means, out_quats = scene_means.copy(), quats.copy()
+        seconds = best_time(lambda: skin_into(means, out_quats, [bound], [rod]), repeat=7)
+        rotations = np.asarray(rod.vertex_frames)
+        ref = best_time(lambda: numpy_reference(None, rod.positions, rotations, bound), repeat=2)
+        rows.append([f"{count:,}", f"{seconds * 1e3:.1f}", f"{count / seconds / 1e6:.0f}", f"{ref * 1e3:.0f}", f"{ref / seconds:.0f}x"])
+    return rows
+
+
+def plant_rows() -> list[list[object]]:
+    scene = load_scene(data.sample("plant"))
+    camera, stroke = data.sample_camera("plant"), data.sample_stroke("plant")
+    clock = time.perf_counter()
+    extraction = extract_rod(scene, camera, stroke)
+    extract_s = time.perf_counter() - clock
+    animation = Animation(scene, [extraction])
+    pull = Pull(-1, (0.0, -0.05, 0.03), duration=0.5, hold=0.5, release=True, settle=1.0)
+    totals = {"simulate": 0.0, "skin": 0.0, "render": 0.0, "png": 0.0}
+    start = time.perf_counter()
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for frame in animation.frames(pull, fps=30):
+            for stage in ("simulate", "skin"):
+                totals[stage] += frame.timings[stage]
+            clock = time.perf_counter()
+            rgb = to_uint8(render(scene.replace(means=animation.means, quats=animation.quats), camera).rgb)
+            totals["render"] += time.perf_counter() - clock
+            clock = time.perf_counter()
+            save_png(Path(tmp) / f"{frame.index:04d}.png", rgb)
+            totals["png"] += time.perf_counter() - clock
+    total = time.perf_counter() - start
+    return [[f"{len(scene):,}", len(extraction.gaussian_ids), f"{extract_s * 1e3:.0f}"]
+            + [f"{totals[k]:.2f}" for k in totals] + [f"{total:.1f}"]]
+
+
+def main() -> None:
+    print_table("skin_into: bound Gaussians following a bent 200-vertex rod (best of 7)",
+                ["bound gaussians", "ms", "M gaussians/s", "numpy reference ms", "ratio"], skin_rows())
+    print_table("animate: 60 frames (2 s at 30 fps) of the plant capture at 960x540, pull + hold + release",
+                ["gaussians", "bound", "extract ms", "simulate s", "skin s", "render s", "png s", "total s"], plant_rows())
+
+
+if __name__ == "__main__":
+    main()

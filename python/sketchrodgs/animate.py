@@ -1,0 +1,153 @@
+"""Pull and release: simulate extracted rods and skin the scene, frame by frame.
+
+The app's interaction as a script: both ends of each rod clamped, one vertex grabbed and its
+target moved by an offset over `duration` seconds, held for `hold` seconds, then released and
+left to spring back for `settle` seconds.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import SketchRodGSError
+from .extract import Extraction
+from .rod import Rod, RodParams, World
+from .scene import GaussianScene
+from .skin import BoundRod, skin_into
+
+
+@dataclass(frozen=True)
+class Pull:
+    """A grab-move-hold-release gesture on one rod vertex.
+
+    Attributes:
+        vertex: the grabbed vertex (negative counts from the end).
+        offset: how far the grab target moves, in scene units.
+        duration: seconds to move the target there.
+        hold: seconds to hold it.
+        release: let go after holding.
+        settle: seconds simulated after the release.
+        rod: which rod (index into the rods) is grabbed.
+    """
+
+    vertex: int
+    offset: tuple[float, float, float]
+    duration: float = 0.5
+    hold: float = 0.5
+    release: bool = True
+    settle: float = 1.5
+    rod: int = 0
+
+    def __post_init__(self) -> None:
+        offset = tuple(float(v) for v in self.offset)
+        if len(offset) != 3 or not np.isfinite(offset).all():
+            raise SketchRodGSError(f"pull offset: expected 3 finite numbers, got {self.offset!r}")
+        object.__setattr__(self, "offset", offset)
+        for name in ("duration", "hold", "settle"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise SketchRodGSError(f"pull {name}: must be >= 0 seconds, got {value}")
+
+    @property
+    def total(self) -> float:
+        """Seconds of simulated time the gesture covers."""
+        return self.duration + self.hold + (self.settle if self.release else 0.0)
+
+    def phase(self, t: float) -> str:
+        if t < self.duration:
+            return "pull"
+        if t < self.duration + self.hold or not self.release:
+            return "hold"
+        return "release"
+
+    def target_fraction(self, t: float) -> float:
+        """How far along its offset the grab target is at time `t` (smooth start and stop)."""
+        if self.duration == 0:
+            return 1.0
+        s = min(max(t / self.duration, 0.0), 1.0)
+        return s * s * (3 - 2 * s)
+
+
+@dataclass
+class Frame:
+    """One animation frame: the time, the phase, and the stage timings of getting there."""
+
+    index: int
+    time: float
+    phase: str
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+class Animation:
+    """Rods built from extractions, bound to a scene; `frames` steps them and skins the scene.
+
+    Args:
+        scene: the scene at rest.
+        extractions: one per rod (from `extract_rod` or `load_rod`).
+        params: material per rod (a single one is used for all); its radius is replaced by each
+            extraction's radius.
+        clamp_ends: clamp both ends of every rod, as the authors' app does.
+    """
+
+    def __init__(self, scene: GaussianScene, extractions: Sequence[Extraction],
+                 params: RodParams | Sequence[RodParams] = RodParams(), clamp_ends: bool = True) -> None:
+        if not extractions:
+            raise SketchRodGSError("no rods to animate")
+        per_rod = [params] * len(extractions) if isinstance(params, RodParams) else list(params)
+        self.scene = scene
+        self.world = World()
+        self.rods: list[Rod] = []
+        self.bound: list[BoundRod] = []
+        for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
+            if len(extraction.gaussian_ids) and extraction.gaussian_ids.max() >= len(scene):
+                raise SketchRodGSError(
+                    f"rod {k}: binds Gaussian {int(extraction.gaussian_ids.max())} but the scene has {len(scene)}")
+            material = RodParams(**{**p.to_dict(), "radius": extraction.radius})
+            rod = Rod(extraction.polyline, params=material, world=self.world)
+            if clamp_ends:
+                rod.clamp(0)
+                rod.clamp(-1)
+            self.rods.append(rod)
+            self.bound.append(BoundRod.from_extraction(scene, extraction, rod))
+        self.means = scene.means.copy()
+        self.quats = scene.quats.copy()
+
+    def current_scene(self) -> GaussianScene:
+        """The deformed scene now (a new scene sharing nothing mutable with the animation)."""
+        return self.scene.replace(means=self.means.copy(), quats=self.quats.copy())
+
+    def frames(self, pull: Pull, fps: float) -> Iterator[Frame]:
+        """Simulate `pull` at `fps` frames per second, skinning after every frame."""
+        if not (np.isfinite(fps) and fps > 0):
+            raise SketchRodGSError(f"fps: must be > 0, got {fps}")
+        if not 0 <= pull.rod < len(self.rods):
+            raise SketchRodGSError(f"pull rod: {pull.rod} is not one of the {len(self.rods)} rods")
+        rod = self.rods[pull.rod]
+        if not -rod.num_vertices <= pull.vertex < rod.num_vertices:
+            raise SketchRodGSError(f"grab vertex: {pull.vertex} is outside the rod's {rod.num_vertices} vertices")
+        start = np.array(rod.positions[pull.vertex], np.float64)
+        offset = np.array(pull.offset)
+        dt = 1.0 / fps
+        count = int(round(pull.total * fps))
+        rod.grab(pull.vertex, start)
+        released = False
+        for index in range(1, count + 1):
+            t = index * dt
+            phase = pull.phase(t)
+            timings: dict[str, float] = {}
+            clock = time.perf_counter()
+            if phase == "release" and not released:
+                rod.release()
+                released = True
+            elif not released:
+                rod.move_grab(start + pull.target_fraction(t) * offset)
+            self.world.step(dt)
+            timings["simulate"] = time.perf_counter() - clock
+            clock = time.perf_counter()
+            skin_into(self.means, self.quats, self.bound, self.rods)
+            timings["skin"] = time.perf_counter() - clock
+            yield Frame(index, t, phase, timings)

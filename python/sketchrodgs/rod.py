@@ -1,0 +1,513 @@
+"""Discrete elastic rods: the extracted polyline becomes a rod the user pulls and releases.
+
+The solver is the Rust crate `sketchrodgs-rod` (Bergou et al. 2008/2010 discrete elastic rods,
+backward Euler solved by Newton's method on the banded Hessian). Parameters are SI: the scene's
+length unit is taken as the metre.
+
+Example:
+    >>> import numpy as np
+    >>> from sketchrodgs.rod import Rod
+    >>> rod = Rod(np.c_[np.linspace(0, 1, 21), np.zeros(21), np.zeros(21)], radius=0.01)
+    >>> rod.clamp(0); rod.clamp(-1)
+    >>> rod.grab(10, (0.5, 0.3, 0.0))
+    >>> report = rod.step(1 / 60, n=30)     # half a second, pulled
+    >>> rod.release()
+    >>> report = rod.step(1 / 60, n=300)    # let go
+    >>> bool(np.abs(rod.positions - rod.rest_positions).max() < 1e-3)
+    True
+
+Several rods share a `World` and are stepped together: `w = World(); a = Rod(p, world=w)`.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, fields
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _core
+from .errors import SimulationError
+
+__all__ = [
+    "Rod",
+    "RodEnergy",
+    "RodParams",
+    "SolverSettings",
+    "StaticReport",
+    "StepReport",
+    "World",
+    "merge_coincident",
+]
+
+logger = logging.getLogger("sketchrodgs")
+
+BoundaryKind = Literal["free", "pinned", "clamped"]
+
+
+@dataclass(frozen=True)
+class RodParams:
+    """Material of a rod with a solid circular cross-section, in SI units.
+
+    Attributes:
+        radius: cross-section radius r [m] (the paper's R).
+        youngs_modulus: Young's modulus E [Pa]; stretching EA and bending EI.
+        shear_modulus: shear modulus G [Pa] for twisting GJ; None derives E / (2 (1 + nu)).
+        poisson_ratio: Poisson ratio nu, used only when `shear_modulus` is None.
+        density: density rho [kg/m^3]: lumped vertex masses and twist inertia.
+        damping: viscous (mass-proportional) damping rate alpha [1/s].
+        gravity: gravitational acceleration [m/s^2]; zero (off) by default.
+    """
+
+    radius: float = 0.01
+    youngs_modulus: float = 1.0e7
+    shear_modulus: float | None = None
+    poisson_ratio: float = 0.5
+    density: float = 1000.0
+    damping: float = 2.0
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        g = tuple(float(v) for v in self.gravity)
+        if len(g) != 3:
+            raise SimulationError(f"gravity: expected 3 components, got {len(g)}")
+        object.__setattr__(self, "gravity", g)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (the rod file's "material")."""
+        d = asdict(self)
+        d["gravity"] = list(self.gravity)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> RodParams:
+        """Inverse of `to_dict`; unknown keys are an error."""
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise SimulationError(f"rod material: unknown keys {sorted(unknown)}")
+        kw = dict(d)
+        if "gravity" in kw:
+            kw["gravity"] = tuple(kw["gravity"])
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Settings of the implicit solver of a `World`.
+
+    Attributes:
+        tolerance: Newton stops when the largest update is below tolerance * rod length
+            (positions) and tolerance radians (twist).
+        max_iterations: Newton iterations per (sub)step before it is retried as two halves.
+        max_halvings: how often a failing step may be halved (2**max_halvings substeps at most).
+        max_static_iterations: Newton iterations of a quasi-static solve.
+    """
+
+    tolerance: float = 1.0e-7
+    max_iterations: int = 25
+    max_halvings: int = 8
+    max_static_iterations: int = 200
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SolverSettings:
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class StepReport:
+    """What a step did for one rod.
+
+    Attributes:
+        substeps: substeps the step was finally taken in (1 when it converged at once).
+        newton_iterations: Newton iterations over all attempts, rejected ones included.
+        rejected: attempts rejected and retried as two half steps.
+        converged: whether every substep converged (if not, the finest substeps kept their
+            best finite iterate; positions are never NaN).
+    """
+
+    substeps: int
+    newton_iterations: int
+    rejected: int
+    converged: bool
+
+
+@dataclass(frozen=True)
+class StaticReport:
+    """Result of a quasi-static solve: Newton iterations, convergence, final energy [J]."""
+
+    iterations: int
+    converged: bool
+    energy: float
+
+
+@dataclass(frozen=True)
+class RodEnergy:
+    """Energy of a rod [J]."""
+
+    stretch: float
+    bend: float
+    twist: float
+    kinetic: float
+    gravity: float
+
+    @property
+    def elastic(self) -> float:
+        return self.stretch + self.bend + self.twist
+
+    @property
+    def total(self) -> float:
+        return self.elastic + self.kinetic + self.gravity
+
+
+def _points(a: npt.ArrayLike, name: str) -> np.ndarray:
+    arr = np.ascontiguousarray(a, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise SimulationError(f"{name}: expected shape (N, 3), got {arr.shape}")
+    return arr
+
+
+def _vec3(v: npt.ArrayLike, name: str) -> tuple[float, float, float]:
+    arr = np.asarray(v, dtype=np.float64).reshape(-1)
+    if arr.shape != (3,):
+        raise SimulationError(f"{name}: expected 3 values, got shape {np.shape(v)}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _rotation(r: npt.ArrayLike | None, name: str) -> np.ndarray:
+    if r is None:
+        return np.eye(3)
+    arr = np.ascontiguousarray(r, dtype=np.float64)
+    if arr.shape != (3, 3):
+        raise SimulationError(f"{name}: expected a (3, 3) rotation matrix, got shape {arr.shape}")
+    return arr
+
+
+def merge_coincident(polyline: npt.ArrayLike, tol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Drops vertices closer than `tol` to the previous kept one (a rod rejects zero-length edges).
+
+    Args:
+        polyline: (N, 3) points.
+        tol: merge distance; default 1e-9 of the polyline's length.
+
+    Returns:
+        (M, 3) float64 polyline and (N,) int64 map from each input vertex to its kept vertex.
+    """
+    p = _points(polyline, "polyline")
+    if tol is None:
+        tol = 1e-9 * float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if len(p) > 1 else 0.0
+    keep = [0] if len(p) else []
+    index = np.zeros(len(p), dtype=np.int64)
+    for i in range(1, len(p)):
+        if np.linalg.norm(p[i] - p[keep[-1]]) > tol:
+            keep.append(i)
+        index[i] = len(keep) - 1
+    return p[keep].copy(), index
+
+
+class World:
+    """Rods stepped together (no rod-rod contact).
+
+    Args:
+        solver: solver settings shared by the rods.
+    """
+
+    def __init__(self, solver: SolverSettings | None = None) -> None:
+        self._core = _core.RodWorld()
+        self._rods: list[Rod] = []
+        if solver is not None:
+            self.solver = solver
+
+    @property
+    def solver(self) -> SolverSettings:
+        return SolverSettings(**self._core.solver())
+
+    @solver.setter
+    def solver(self, s: SolverSettings) -> None:
+        self._core.set_solver(float(s.tolerance), int(s.max_iterations), int(s.max_halvings), int(s.max_static_iterations))
+
+    @property
+    def rods(self) -> list[Rod]:
+        """The rods, in the order they were added."""
+        return list(self._rods)
+
+    def __len__(self) -> int:
+        return len(self._rods)
+
+    def add(self, polyline: npt.ArrayLike, params: RodParams | None = None, **material: Any) -> Rod:
+        """Adds a rod at rest in the shape of `polyline` (N, 3); see `Rod`."""
+        return Rod(polyline, params=params, world=self, **material)
+
+    def remove(self, rod: Rod) -> None:
+        """Removes `rod` from the world (its handle is then detached)."""
+        k = self._rods.index(rod)
+        self._core.remove_rod(k)
+        self._rods.pop(k)
+        for j, r in enumerate(self._rods):
+            r._index = j
+        rod._index = None
+
+    def step(self, dt: float, n: int = 1) -> list[StepReport]:
+        """Advances every rod by `dt` seconds, `n` times (GIL released).
+
+        A step that does not converge is retried in halves; one that still does not is kept
+        (finite) and reported with `converged=False` and a logged warning.
+
+        Returns:
+            One report per rod, summed over the `n` steps.
+        """
+        raw = self._core.step(float(dt), int(n))
+        reports = [StepReport(int(s), int(it), int(rj), bool(c)) for s, it, rj, c in raw]
+        for k, r in enumerate(reports):
+            if not r.converged:
+                logger.warning("rod %d: step did not converge (%s)", k, r)
+        return reports
+
+
+class Rod:
+    """A discrete elastic rod built from a polyline (its rest, natural shape).
+
+    Args:
+        polyline: (N, 3) vertex positions [m], N >= 2, no zero-length edges (see
+            `merge_coincident`).
+        radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity: the
+            material, see `RodParams` (ignored when `params` is given).
+        params: the material as a `RodParams`.
+        world: the world to add the rod to; a private one by default.
+
+    Raises:
+        SimulationError: bad polyline (shape, NaN, zero-length edge, fold-back) or parameters.
+    """
+
+    def __init__(
+        self,
+        polyline: npt.ArrayLike,
+        *,
+        radius: float = 0.01,
+        youngs_modulus: float = 1.0e7,
+        shear_modulus: float | None = None,
+        poisson_ratio: float = 0.5,
+        density: float = 1000.0,
+        damping: float = 2.0,
+        gravity: Sequence[float] = (0.0, 0.0, 0.0),
+        params: RodParams | None = None,
+        world: World | None = None,
+    ) -> None:
+        if params is None:
+            params = RodParams(
+                radius=radius,
+                youngs_modulus=youngs_modulus,
+                shear_modulus=shear_modulus,
+                poisson_ratio=poisson_ratio,
+                density=density,
+                damping=damping,
+                gravity=tuple(gravity),  # type: ignore[arg-type]
+            )
+        self._world = world if world is not None else World()
+        p = params
+        self._index: int | None = self._world._core.add_rod(
+            _points(polyline, "polyline"),
+            float(p.radius),
+            float(p.youngs_modulus),
+            None if p.shear_modulus is None else float(p.shear_modulus),
+            float(p.poisson_ratio),
+            float(p.density),
+            float(p.damping),
+            _vec3(p.gravity, "gravity"),
+        )
+        self._world._rods.append(self)
+        self._params = p
+        self._n = int(self._world._core.num_vertices(self._index))
+
+    # ----- identity -----
+
+    @property
+    def world(self) -> World:
+        return self._world
+
+    @property
+    def index(self) -> int:
+        """Index of the rod in its world."""
+        if self._index is None:
+            raise SimulationError("this rod was removed from its world")
+        return self._index
+
+    @property
+    def params(self) -> RodParams:
+        return self._params
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def num_vertices(self) -> int:
+        return self._n
+
+    def _vertex(self, v: int) -> int:
+        v = int(v)
+        if not -self._n <= v < self._n:
+            raise SimulationError(f"vertex {v} is out of range for a rod of {self._n} vertices")
+        return v % self._n
+
+    # ----- boundary conditions and interaction -----
+
+    def clamp(self, vertex: int) -> None:
+        """Holds `vertex`'s position and frame where they are (both ends: the app's default)."""
+        self.world._core.set_boundary(self.index, self._vertex(vertex), "clamped")
+
+    def pin(self, vertex: int, position: npt.ArrayLike | None = None) -> None:
+        """Holds `vertex`'s position (at `position` if given, reached over the next step)."""
+        v = self._vertex(vertex)
+        if position is None:
+            self.world._core.set_boundary(self.index, v, "pinned")
+        else:
+            self.world._core.pin_at(self.index, v, _vec3(position, "position"))
+
+    def free(self, vertex: int) -> None:
+        """Removes any pin or clamp of `vertex`."""
+        self.world._core.set_boundary(self.index, self._vertex(vertex), "free")
+
+    def set_boundary(self, vertex: int, kind: BoundaryKind) -> None:
+        self.world._core.set_boundary(self.index, self._vertex(vertex), kind)
+
+    @property
+    def boundaries(self) -> list[str]:
+        """Per vertex: "free", "pinned" or "clamped"."""
+        return list(self.world._core.boundaries(self.index))
+
+    def move_clamp(self, vertex: int, rotation: npt.ArrayLike | None = None, translation: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
+        """Moves the clamp of `vertex` rigidly from its pose when clamped: its frame rotated by
+        `rotation` (3, 3), the vertex translated by `translation`. Turn less than pi per step."""
+        self.world._core.move_clamp(self.index, self._vertex(vertex), _rotation(rotation, "rotation"), _vec3(translation, "translation"))
+
+    def clamp_torque(self, vertex: int) -> float:
+        """Twisting moment [N m] the rod exerts on the clamp of `vertex` about its tangent."""
+        return float(self.world._core.clamp_torque(self.index, self._vertex(vertex)))
+
+    def grab(self, vertex: int, target: npt.ArrayLike) -> None:
+        """From the next step on, `vertex` follows `target` exactly (a hard position constraint;
+        the frame stays free). The motion to the target happens within the next step."""
+        self.world._core.grab(self.index, self._vertex(vertex), _vec3(target, "target"))
+
+    def move_grab(self, target: npt.ArrayLike) -> None:
+        """Moves the grab target. Raises SimulationError if nothing is grabbed."""
+        self.world._core.move_grab(self.index, _vec3(target, "target"))
+
+    def release(self) -> None:
+        """Lets go; the vertex keeps its velocity."""
+        self.world._core.release(self.index)
+
+    @property
+    def grabbed(self) -> tuple[int, np.ndarray] | None:
+        """(vertex, target) of the current grab, or None."""
+        g = self.world._core.grabbed(self.index)
+        return None if g is None else (int(g[0]), np.asarray(g[1], dtype=np.float64))
+
+    def transform(self, rotation: npt.ArrayLike | None = None, translation: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
+        """Moves the rod rigidly, x -> R x + t, with its frames, pins, clamps and grab target."""
+        self.world._core.transform(self.index, _rotation(rotation, "rotation"), _vec3(translation, "translation"))
+
+    def set_positions(self, positions: npt.ArrayLike) -> None:
+        """Teleports the vertices (N, 3); velocities zeroed, frames parallel-transported."""
+        self.world._core.set_positions(self.index, _points(positions, "positions"))
+
+    def set_velocities(self, velocities: npt.ArrayLike) -> None:
+        self.world._core.set_velocities(self.index, _points(velocities, "velocities"))
+
+    # ----- simulation -----
+
+    def step(self, dt: float, n: int = 1) -> StepReport:
+        """Advances the rod's whole world by `dt` seconds, `n` times; returns this rod's report."""
+        return self.world.step(dt, n)[self.index]
+
+    def solve_static(self) -> StaticReport:
+        """Moves the rod to its equilibrium under gravity and constraints (Newton on the
+        potential, no inertia); velocities zeroed."""
+        it, conv, e = self.world._core.solve_static(self.index)
+        if not conv:
+            logger.warning("rod %d: static solve did not converge in %d iterations", self.index, it)
+        return StaticReport(int(it), bool(conv), float(e))
+
+    # ----- state -----
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(N, 3) float64 vertex positions [m]."""
+        return self.world._core.positions(self.index)
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(N, 3) float64 vertex velocities [m/s]."""
+        return self.world._core.velocities(self.index)
+
+    @property
+    def rest_positions(self) -> np.ndarray:
+        """(N, 3) float64: the polyline the rod was built from."""
+        return self.world._core.rest_positions(self.index)
+
+    @property
+    def rest_lengths(self) -> np.ndarray:
+        """(N-1,) rest edge lengths [m]."""
+        return self.world._core.rest_lengths(self.index)
+
+    @property
+    def masses(self) -> np.ndarray:
+        """(N,) lumped vertex masses [kg]."""
+        return self.world._core.masses(self.index)
+
+    @property
+    def twist(self) -> np.ndarray:
+        """(N-1,) twist angle of each edge's material frame from its reference frame [rad]."""
+        return self.world._core.twist_angles(self.index)
+
+    @property
+    def strain(self) -> np.ndarray:
+        """(N-1,) edge stretch |e| / |e_rest| - 1."""
+        return self.world._core.edge_strain(self.index)
+
+    def twisting_moment(self) -> np.ndarray:
+        """(N,) internal twisting moment GJ (m_i - m0_i) / l_i [N m] (zero at the ends)."""
+        return self.world._core.twisting_moment(self.index)
+
+    @property
+    def edge_frames(self) -> np.ndarray:
+        """(N-1, 3, 3) material frame of each edge, a rotation with columns (m1, m2, t)."""
+        return self.world._core.edge_frames(self.index)
+
+    @property
+    def vertex_frames(self) -> np.ndarray:
+        """(N, 3, 3) per-vertex frame: the average of the adjacent edges' frames."""
+        return self.world._core.vertex_frames(self.index)
+
+    @property
+    def edge_quats(self) -> np.ndarray:
+        """(N-1, 4) edge frames as unit quaternions w, x, y, z (w >= 0)."""
+        return self.world._core.edge_quats(self.index)
+
+    @property
+    def vertex_quats(self) -> np.ndarray:
+        """(N, 4) vertex frames as unit quaternions w, x, y, z (w >= 0)."""
+        return self.world._core.vertex_quats(self.index)
+
+    def frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """(edge frames (N-1, 3, 3), vertex frames (N, 3, 3)) as rotation matrices."""
+        return self.edge_frames, self.vertex_frames
+
+    def energy(self) -> RodEnergy:
+        """Stretch, bend, twist, kinetic and gravitational energy [J]."""
+        return RodEnergy(**{k: float(v) for k, v in self.world._core.energy(self.index).items()})
+
+    def forces(self) -> tuple[np.ndarray, np.ndarray]:
+        """Elastic forces on the vertices (N, 3) [N] and torques on the edges' twist (N-1,) [N m]."""
+        return self.world._core.forces(self.index)
+
+    def __repr__(self) -> str:
+        where = "detached" if self._index is None else f"rod {self._index} of {len(self._world)}"
+        return f"Rod({self._n} vertices, radius={self._params.radius}, E={self._params.youngs_modulus}, {where})"
+
