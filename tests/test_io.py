@@ -178,14 +178,6 @@ def test_ascii_ply_with_huge_count_fails_fast(tmp_path):
         load_scene(path)
 
 
-def test_compressed_ply_is_named(tmp_path):
-    path = tmp_path / "c.ply"
-    path.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement chunk 1\nproperty float min_x\n"
-                     b"element vertex 1\nproperty uint packed_position\nend_header\n" + bytes(8))
-    with pytest.raises(SceneFormatError, match="compressed PLY"):
-        load_scene(path)
-
-
 @pytest.mark.parametrize(
     "content, message",
     [

@@ -8,7 +8,7 @@ import os
 
 import numpy as np
 
-from ..io import detect_format, load_scene
+from ..io import FORMAT_NAMES, detect_format, load_scene
 from ._args import scene_path
 
 NAME = "info"
@@ -16,13 +16,14 @@ HELP = "print the Gaussian count, SH degree, bounding box and opacity/scale stat
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", type=scene_path, help="scene file (.ply or .splat), or sample:NAME")
+    parser.add_argument("scene", type=scene_path, help="scene file (.ply, compressed .ply, .splat, .spz), or sample:NAME")
     parser.add_argument("--json", action="store_true", help="print the statistics as JSON")
 
 
 def scene_summary(path: str) -> dict[str, object]:
     """The statistics `info` prints, as a JSON-ready dict."""
     scene = load_scene(path)
+    fmt = detect_format(path)
     largest_scale = scene.scales.max(axis=1)
 
     def stats(values: np.ndarray) -> dict[str, float]:
@@ -31,7 +32,8 @@ def scene_summary(path: str) -> dict[str, object]:
 
     return {
         "file": os.fspath(path),
-        "format": detect_format(path),
+        "format": fmt,
+        "format_name": FORMAT_NAMES[fmt],
         "bytes": os.path.getsize(path),
         "count": len(scene),
         "sh_degree": scene.sh_degree,
@@ -49,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     lo, hi = np.array(summary["bbox_min"]), np.array(summary["bbox_max"])
     op, sc = summary["opacity"], summary["largest_scale"]
-    print(f"file       {summary['file']}  ({summary['format']}, {summary['bytes'] / 1e6:.2f} MB)")
+    print(f"file       {summary['file']}  ({summary['format_name']}, {summary['bytes'] / 1e6:.2f} MB)")
     print(f"gaussians  {summary['count']:,}")
     print(f"sh degree  {summary['sh_degree']}")
     print(f"bbox min   {lo[0]: .4f} {lo[1]: .4f} {lo[2]: .4f}")

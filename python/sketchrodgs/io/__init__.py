@@ -1,6 +1,7 @@
 """Scene files: pick the reader from the content, write atomically.
 
-Readers: INRIA 3DGS `.ply` (binary or ASCII, SH degree 0..3) and antimatter15 `.splat`.
+Readers: INRIA 3DGS `.ply` (binary or ASCII, SH degree 0..3), the PlayCanvas/SuperSplat
+compressed `.ply`, antimatter15 `.splat` and Niantic `.spz` (versions 2 to 4).
 Writers: `.ply` (lossless for float32 values) and `.splat` (lossy: 8-bit colour, opacity and
 rotation, no SH beyond the DC term).
 """
@@ -8,34 +9,67 @@ rotation, no SH beyond the DC term).
 from __future__ import annotations
 
 import os
+import zlib
 from pathlib import Path
 
 from ..errors import SceneFormatError
 from ..scene import GaussianScene
-from . import ply, splat
+from . import compressed_ply, ply, splat, spz
 
-__all__ = ["detect_format", "load_scene", "save_scene"]
+__all__ = ["FORMAT_NAMES", "detect_format", "load_scene", "save_scene"]
 
-_READERS = {"ply": ply.read_ply, "splat": splat.read_splat}
+_READERS = {
+    "ply": ply.read_ply,
+    "compressed-ply": compressed_ply.read_compressed_ply,
+    "splat": splat.read_splat,
+    "spz": spz.read_spz,
+}
+# What each format name returned by detect_format stands for, for people.
+FORMAT_NAMES = {
+    "ply": "INRIA 3DGS PLY",
+    "compressed-ply": "PlayCanvas compressed PLY",
+    "splat": "antimatter15 .splat",
+    "spz": "Niantic SPZ",
+}
+_HEAD_BYTES = 1 << 16  # enough for any PLY header we read, and for a gzip header
 _WRITERS = {".ply": ply.write_ply, ".splat": splat.write_splat}
 
 
 def detect_format(path: str | os.PathLike[str]) -> str:
-    """Name of the format of the file at `path` ("ply" or "splat"), judged from its first bytes.
+    """Name of the format of the file at `path`, judged from its first bytes (see FORMAT_NAMES).
 
-    `.splat` has no magic number, so a file is taken as `.splat` when it is not a PLY and its name
+    A PLY header with a `chunk` element is a compressed PLY; gzip data or `NGSP` is SPZ. `.splat`
+    has no magic number, so a file is taken as `.splat` when it is none of these and its name
     ends in `.splat`.
     """
     try:
         with open(path, "rb") as stream:
-            head = stream.read(4)
+            head = stream.read(_HEAD_BYTES)
     except OSError as exc:
         raise SceneFormatError(f"{path}: cannot read ({exc.strerror})") from None
-    if head == b"ply\n" or head == b"ply\r":
-        return "ply"
+    if head[:4] in (b"ply\n", b"ply\r"):
+        end = head.find(b"end_header")
+        lines = head[:end if end >= 0 else len(head)].splitlines()
+        return "compressed-ply" if any(line.split()[:2] == [b"element", b"chunk"] for line in lines) else "ply"
+    if head[:4] == spz.MAGIC or _gzipped_spz(head):
+        return "spz"
     if Path(path).suffix.lower() == ".splat":
         return "splat"
-    raise SceneFormatError(f"{path}: unknown scene format (not a PLY file and not named .splat)")
+    raise SceneFormatError(f"{path}: unknown scene format (not PLY, not SPZ, and not named .splat)")
+
+
+def _gzipped_spz(head: bytes) -> bool:
+    """Whether `head` starts a gzip stream whose content starts with the SPZ magic.
+
+    Looking inside keeps a `.splat` whose first float happens to begin with the gzip bytes a
+    `.splat`.
+    """
+    if head[:2] != spz.GZIP_MAGIC:
+        return False
+    try:
+        return zlib.decompressobj(wbits=16 + zlib.MAX_WBITS).decompress(head, len(spz.MAGIC)) == spz.MAGIC
+    except zlib.error:
+        return False
 
 
 def load_scene(path: str | os.PathLike[str]) -> GaussianScene:

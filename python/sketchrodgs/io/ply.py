@@ -41,8 +41,10 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
     except Exception as exc:  # plyfile raises many types for bad bytes; name the file instead
         raise SceneFormatError(f"{path}: malformed PLY ({type(exc).__name__}: {exc})") from None
     names = [element.name for element in data.elements]
-    if "chunk" in names:
-        raise SceneFormatError(f"{path}: compressed PLY (PlayCanvas 'chunk' element) is not supported")
+    if "chunk" in names:  # PlayCanvas compressed PLY
+        from .compressed_ply import decode_compressed_ply
+
+        return decode_compressed_ply(data, os.fspath(path))
     if "vertex" not in names:
         raise SceneFormatError(f"{path}: no 'vertex' element (elements: {', '.join(names) or 'none'})")
     vertex = data["vertex"]

@@ -1,0 +1,118 @@
+"""Scene decode rate of every readable format at 100k and 1M splats, plus the real test files.
+
+The SPZ and compressed PLY files are written by the test-side encoders
+(tests/reference/format_encoders.py); the others by our own writers. A row's rate is splats per
+second of `load_scene` (file read, decompression, decoding and scene validation), best of 5.
+Peak memory of a 1M load is measured in a fresh process, as in bench_io.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from _table import best_time, print_table
+from bench_io import peak_load_bytes, synthetic_scene
+
+from sketchrodgs import GaussianScene, load_scene, save_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from reference.format_encoders import encode_compressed_ply, encode_spz  # noqa: E402
+
+SIZES = (100_000, 1_000_000)
+TARGETS = {"splat": 20.0, "spz": 5.0, "compressed-ply": 5.0}  # M splats/s the issue asks for
+
+
+def spz_writer(version: int) -> Callable[[GaussianScene, Path], None]:
+    def write(scene: GaussianScene, path: Path) -> None:
+        # SPZ holds positions to +-2048 at 12 fractional bits and SH in (-1, 1)
+        path.write_bytes(encode_spz(scene.means, scene.scales, scene.quats, scene.opacities,
+                                    np.clip(scene.sh, -0.99, 0.99), version=version))
+    return write
+
+
+def compressed_writer(scene: GaussianScene, path: Path) -> None:
+    path.write_bytes(encode_compressed_ply(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh))
+
+
+# (label, format, file suffix, SH degree, writer)
+CASES = [
+    (".splat", "splat", ".splat", 0, save_scene),
+    ("INRIA .ply", "ply", ".ply", 0, save_scene),
+    ("INRIA .ply", "ply", ".ply", 3, save_scene),
+    ("compressed .ply", "compressed-ply", ".ply", 0, compressed_writer),
+    ("compressed .ply", "compressed-ply", ".ply", 3, compressed_writer),
+    ("SPZ v2 (gzip)", "spz", ".spz", 0, spz_writer(2)),
+    ("SPZ v3 (gzip)", "spz", ".spz", 0, spz_writer(3)),
+    ("SPZ v3 (gzip)", "spz", ".spz", 3, spz_writer(3)),
+    ("SPZ v4 (zstd)", "spz", ".spz", 0, spz_writer(4)),
+    ("SPZ v4 (zstd)", "spz", ".spz", 3, spz_writer(4)),
+]
+
+
+def rate_row(label: str, fmt: str, degree: int, path: Path, n: int, peak: bool) -> list[object]:
+    seconds = best_time(lambda: load_scene(path), repeat=5)
+    rate = n / seconds / 1e6
+    target = TARGETS.get(fmt)
+    verdict = "" if target is None else f">= {target:.0f}: {'yes' if rate >= target else 'NO'}"
+    size = path.stat().st_size
+    peak_text = ""
+    if peak:
+        used = peak_load_bytes(path)
+        peak_text = f"{used / 1e6:.0f} MB ({used / size:.1f}x file)"
+    return [f"{n:,}", label, degree, f"{size / 1e6:.1f} MB", f"{seconds * 1e3:.1f}", f"{rate:.1f}", verdict, peak_text]
+
+
+def splat_breakdown(path: Path) -> list[list[object]]:
+    """Where a .splat load spends its time: the file read alone, decoding, scene validation."""
+    scene = load_scene(path)
+    read_s = best_time(lambda: np.fromfile(path, dtype=np.uint8), repeat=7)
+    arrays = (scene.means, scene.scales, scene.quats, scene.opacities, scene.sh)
+    check_s = best_time(lambda: GaussianScene(*arrays), repeat=7)
+    total = best_time(lambda: load_scene(path), repeat=7)
+    return [
+        ["reading the whole file (np.fromfile), for scale", f"{read_s * 1e3:.1f}"],
+        ["load_scene: blockwise read + decode + validation", f"{total * 1e3:.1f}"],
+        ["  of which GaussianScene validation (scene.py)", f"{check_s * 1e3:.1f}"],
+    ]
+
+
+def main() -> None:
+    rows = []
+    breakdown: list[list[object]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in SIZES:
+            scenes = {degree: synthetic_scene(n, degree) for degree in (0, 3)}
+            for label, fmt, suffix, degree, writer in CASES:
+                path = Path(tmp) / f"scene_{n}_{degree}{suffix}"
+                start = time.perf_counter()
+                writer(scenes[degree], path)
+                if time.perf_counter() - start > 60:
+                    print(f"warning: writing {label} took {time.perf_counter() - start:.0f} s", file=sys.stderr)
+                rows.append(rate_row(label, fmt, degree, path, n, peak=n == SIZES[-1]))
+                if fmt == "splat" and n == SIZES[-1]:
+                    breakdown = splat_breakdown(path)
+                path.unlink()
+    data = ROOT / "tests" / "data"
+    for name, label, fmt in (("guitar.compressed.ply", "guitar (real)", "compressed-ply"),
+                             ("biker.spz", "biker (real, SPZ v4)", "spz")):
+        path = data / name
+        if path.exists():
+            scene = load_scene(path)
+            rows.append(rate_row(label, fmt, scene.sh_degree, path, len(scene), peak=True))
+    print_table(
+        "scene decode rate (load_scene, best of 5)",
+        ["splats", "format", "SH", "file", "load ms", "M splat/s", "issue target (M/s)", "load peak RSS"],
+        rows,
+    )
+    if breakdown:
+        print_table(f".splat load of {SIZES[-1]:,} splats, ms (best of 7)", ["stage", "ms"], breakdown)
+
+
+if __name__ == "__main__":
+    main()
