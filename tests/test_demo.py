@@ -36,3 +36,32 @@ def test_demo_writes_everything_it_promises(tmp_path):
     assert (np.abs(last - view).max(axis=2) > 40).sum() < moved.sum() / 10
     summary = (out / "summary.txt").read_text()
     assert "render frames" in summary and "total_s" in summary and "bound_gaussians" in summary
+
+
+def test_demo_view_serves_the_viewer_with_the_rod(tmp_path):
+    """`demo --view` ends in the viewer on loopback with the demo's rod loaded."""
+    import socket
+    import time
+    import urllib.request
+
+    with socket.socket() as probe:  # a free port on loopback
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    process = subprocess.Popen([sys.executable, "-m", "sketchrodgs", "demo", "-o", str(tmp_path / "d"), "--view",
+                                "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        url, deadline, seen = None, time.monotonic() + 240, []
+        while url is None and time.monotonic() < deadline:
+            line = process.stdout.readline()
+            if not line:
+                break
+            seen.append(line)
+            if line.startswith("sketchrodgs viewer: http"):
+                url = line.split()[2]
+        assert url is not None, "".join(seen)
+        assert "1 rod(s)" in seen[-1] and url.startswith("http://127.0.0.1:")
+        with urllib.request.urlopen(url, timeout=30) as response:
+            assert response.status == 200 and b"<html" in response.read().lower()
+    finally:
+        process.terminate()
+        process.wait(timeout=30)

@@ -16,7 +16,7 @@ from ..errors import SketchRodGSError
 
 # Subcommand modules, in the order `--help` lists them. Each defines NAME, HELP,
 # add_arguments(parser) and run(args) -> int.
-SUBCOMMANDS = ("demo", "info", "convert", "render", "extract", "animate")
+SUBCOMMANDS = ("demo", "info", "convert", "render", "extract", "animate", "view")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,76 @@
+"""A stroke drawn in the browser, and the rod extracted under it.
+
+The browser sends the pointer about 20 times a second while the left button is held, so the
+stroke is the polyline through those samples. The camera is read once, when the stroke starts
+(the camera does not move while sketching); extraction renders the scene from it at a working
+resolution, whatever the size of the browser's canvas.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import SketchRodGSError
+from ..extract import Extraction, extract_rod
+from ..scene import GaussianScene
+from .camera import screen_to_pixels, unproject
+
+
+@dataclass(frozen=True)
+class SketchSettings:
+    """Extraction parameters from the panel.
+
+    Attributes:
+        radius: R in scene units, or None to estimate it.
+        alpha: weight of the stroke-distance term (paper Eq. 1).
+        edge_length: rod edge length in scene units, or None for the default.
+    """
+
+    radius: float | None = None
+    alpha: float = 1.0
+    edge_length: float | None = None
+
+
+@dataclass
+class Stroke:
+    """A stroke being drawn: the camera at its start and the pointer samples.
+
+    Attributes:
+        camera: our camera for the client's view, at the working resolution.
+        screen: pointer samples, normalised canvas coordinates ((0, 0) top-left, (1, 1) bottom-right).
+    """
+
+    camera: Camera
+    screen: list[tuple[float, float]] = field(default_factory=list)
+
+    def add(self, position: tuple[float, float] | list[float]) -> None:
+        """Append a pointer sample (repeats of the last one are dropped)."""
+        point = (float(position[0]), float(position[1]))
+        if not np.isfinite(point).all():
+            return
+        if not self.screen or point != self.screen[-1]:
+            self.screen.append(point)
+
+    def pixels(self) -> np.ndarray:
+        """(S, 2) float32 the stroke in the camera's continuous pixel coordinates."""
+        return screen_to_pixels(np.array(self.screen, np.float64).reshape(-1, 2), self.camera)
+
+    def world_points(self, depth: float) -> np.ndarray:
+        """(S, 3) the stroke placed at camera depth `depth` (to draw it in the scene)."""
+        return unproject(self.pixels(), self.camera, depth)
+
+
+def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> Extraction:
+    """Extract the rod under `stroke` in `scene`.
+
+    Raises:
+        PathNotFoundError: the stroke misses the object or the path is too short.
+        SketchRodGSError: the stroke has fewer than two samples, or bad settings.
+    """
+    if len(stroke.screen) < 2:
+        raise SketchRodGSError("the stroke is a single point: drag across the object")
+    return extract_rod(scene, stroke.camera, stroke.pixels(), settings.radius, alpha=settings.alpha,
+                       edge_length=settings.edge_length)
