@@ -12,12 +12,12 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .errors import CameraError
+from .jsonfile import read_json
 
 MAX_IMAGE_SIDE = 16384  # larger images are refused rather than allocated
 RIGID_TOLERANCE = 1e-4  # |R R^T - I| and |det R - 1| allowed in world_to_camera
@@ -277,12 +277,7 @@ def load_cameras(path: str | os.PathLike[str]) -> list[Camera]:
             names the file and the camera's position in it).
     """
     source = str(path)
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as exc:
-        raise CameraError(f"{source}: cannot read ({exc.strerror})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise CameraError(f"{source}: not valid JSON ({exc})") from None
+    data = read_json(path, CameraError)
     entries = data["cameras"] if isinstance(data, dict) and "cameras" in data else data
     if isinstance(entries, dict):
         entries = [entries]

@@ -8,7 +8,6 @@ import json
 import os
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from . import polyline as pl
 from .atomic import atomic_write_text
 from .camera import Camera
 from .errors import PathNotFoundError, SketchRodGSError
+from .jsonfile import read_json
 from .render import RenderResult, render
 from .scene import GaussianScene
 
@@ -121,12 +121,7 @@ class Extraction:
 
 def load_rod(path: str | os.PathLike[str]) -> tuple[Extraction, dict[str, Any]]:
     """Read a rod JSON file: the extraction and its stored material (may be empty)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as exc:
-        raise SketchRodGSError(f"{path}: cannot read ({exc.strerror})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SketchRodGSError(f"{path}: not valid JSON ({exc})") from None
+    data = read_json(path)
     extraction = Extraction.from_json(data, str(path))
     material = data.get("material") or {}
     if not isinstance(material, dict):

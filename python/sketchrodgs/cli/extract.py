@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 
 import numpy as np
 
@@ -13,6 +11,7 @@ from ..errors import SketchRodGSError
 from ..extract import extract_rod
 from ..images import draw_overlay, save_png
 from ..io import load_scene
+from ..jsonfile import read_json
 from ..render import render
 from ._args import scene_path
 
@@ -45,12 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_stroke(path: str) -> np.ndarray:
     """Read a stroke JSON (`{"points": [[x, y], ...]}` or a bare list) as an (S, 2) array."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as exc:
-        raise SketchRodGSError(f"{path}: cannot read ({exc.strerror})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SketchRodGSError(f"{path}: not valid JSON ({exc})") from None
+    data = read_json(path)
     points = data.get("points") if isinstance(data, dict) else data
     try:
         array = np.asarray(points, dtype=np.float64)

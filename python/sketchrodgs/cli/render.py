@@ -12,8 +12,8 @@ import numpy as np
 from ..atomic import atomic_open
 from ..camera import load_cameras, select_camera
 from ..errors import SketchRodGSError
-from ..io import load_scene
 from ..images import save_png
+from ..io import load_scene
 from ..render import render
 from ._args import scene_path
 
