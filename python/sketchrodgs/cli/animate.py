@@ -18,37 +18,10 @@ from ..io import load_scene, save_scene
 from ..render import render
 from ..rod import RodParams
 from ..video import write_video
-from ._args import scene_path
+from ._args import non_negative, number_triple, positive, scene_path
 
 NAME = "animate"
 HELP = "pull a rod vertex, hold, release; write rendered frames, a video and optionally deformed .ply files"
-
-
-def _vector(value: str) -> tuple[float, float, float]:
-    try:
-        parts = tuple(float(v) for v in value.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected DX,DY,DZ numbers, got {value!r}") from None
-    if len(parts) != 3 or not np.isfinite(parts).all():
-        raise argparse.ArgumentTypeError(f"expected three finite numbers DX,DY,DZ, got {value!r}")
-    return parts  # type: ignore[return-value]
-
-
-def _non_negative(value: str) -> float:
-    try:
-        number = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
-    if not (np.isfinite(number) and number >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {value}")
-    return number
-
-
-def _positive(value: str) -> float:
-    number = _non_negative(value)
-    if number == 0:
-        raise argparse.ArgumentTypeError("must be > 0")
-    return number
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -56,21 +29,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", type=scene_path, help="scene file, or sample:NAME")
     parser.add_argument("rods", nargs="+", metavar="ROD.json", help="rod files written by `extract` (the first is grabbed)")
     parser.add_argument("--grab", type=int, required=True, metavar="VERTEX", help="rod vertex to pull (negative counts from the end)")
-    parser.add_argument("--to", type=_vector, required=True, metavar="DX,DY,DZ", help="how far to pull it, in scene units")
-    parser.add_argument("--duration", type=_non_negative, default=0.5, metavar="S", help="seconds to pull (default 0.5)")
-    parser.add_argument("--hold", type=_non_negative, default=0.5, metavar="S", help="seconds to hold (default 0.5)")
+    parser.add_argument("--to", type=number_triple("DX,DY,DZ"), required=True, metavar="DX,DY,DZ", help="how far to pull it, in scene units")
+    parser.add_argument("--duration", type=non_negative, default=0.5, metavar="S", help="seconds to pull (default 0.5)")
+    parser.add_argument("--hold", type=non_negative, default=0.5, metavar="S", help="seconds to hold (default 0.5)")
     parser.add_argument("--release", action="store_true", help="let go after holding and let the rod spring back")
-    parser.add_argument("--settle", type=_non_negative, default=1.5, metavar="S", help="seconds after the release (default 1.5)")
-    parser.add_argument("--fps", type=_positive, default=30.0, help="frames per second (default 30)")
+    parser.add_argument("--settle", type=non_negative, default=1.5, metavar="S", help="seconds after the release (default 1.5)")
+    parser.add_argument("--fps", type=positive, default=30.0, help="frames per second (default 30)")
     parser.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="directory for frames/, the video and ply/")
     parser.add_argument("--camera", metavar="CAM.json", help="camera to render from (default: the first rod's camera)")
     parser.add_argument("--view", metavar="N|NAME", help="which camera of --camera (default: the first)")
     parser.add_argument("--width", type=int, help="render width (default: the camera's)")
     parser.add_argument("--video", default="pull.mp4", metavar="NAME", help="video file name in OUTDIR, .mp4 or .gif (default pull.mp4); 'none' for no video")
     parser.add_argument("--ply", action="store_true", help="also write each deformed scene as ply/frame_NNNN.ply")
-    parser.add_argument("--youngs-modulus", type=_positive, default=defaults.youngs_modulus, metavar="PA", help=f"Young's modulus (default {defaults.youngs_modulus:g})")
-    parser.add_argument("--density", type=_positive, default=defaults.density, help=f"density in kg/m^3 (default {defaults.density:g})")
-    parser.add_argument("--damping", type=_non_negative, default=defaults.damping, metavar="RATE", help=f"damping rate in 1/s (default {defaults.damping:g})")
+    parser.add_argument("--youngs-modulus", type=positive, default=defaults.youngs_modulus, metavar="PA", help=f"Young's modulus (default {defaults.youngs_modulus:g})")
+    parser.add_argument("--density", type=positive, default=defaults.density, help=f"density in kg/m^3 (default {defaults.density:g})")
+    parser.add_argument("--damping", type=non_negative, default=defaults.damping, metavar="RATE", help=f"damping rate in 1/s (default {defaults.damping:g})")
     parser.add_argument("--no-clamp", action="store_true", help="leave the rod ends free instead of clamping them")
 
 

@@ -13,20 +13,10 @@ from ..images import draw_overlay, save_png
 from ..io import load_scene
 from ..jsonfile import read_json
 from ..render import render
-from ._args import scene_path
+from ._args import positive, scene_path
 
 NAME = "extract"
 HELP = "find the 3D polyline of the slender object under a stroke and write it as rod JSON"
-
-
-def _positive(value: str) -> float:
-    try:
-        number = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
-    if not number > 0 or number == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {value}")
-    return number
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,9 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--view", metavar="N|NAME", help="which camera of the file (default: the first)")
     parser.add_argument("--stroke", required=True, metavar="STROKE.json",
                         help='the stroke in pixel coordinates of that camera: {"points": [[x, y], ...]}')
-    parser.add_argument("--radius", type=_positive, help="the object's radius R in scene units (default: estimated)")
+    parser.add_argument("--radius", type=positive, help="the object's radius R in scene units (default: estimated)")
     parser.add_argument("--alpha", type=float, default=1.0, help="weight of the stroke term of the path cost (default 1)")
-    parser.add_argument("--edge-length", type=_positive, help="spacing of the polyline vertices (default: from R and length)")
+    parser.add_argument("--edge-length", type=positive, help="spacing of the polyline vertices (default: from R and length)")
     parser.add_argument("-o", "--output", required=True, metavar="ROD.json", help="rod JSON to write")
     parser.add_argument("--overlay", metavar="OVERLAY.png", help="also draw the render with stroke, path and polyline")
 

@@ -15,20 +15,10 @@ from ..errors import SketchRodGSError
 from ..images import save_png
 from ..io import load_scene
 from ..render import render
-from ._args import scene_path
+from ._args import number_triple, scene_path
 
 NAME = "render"
 HELP = "render a scene for a camera to a PNG, optionally with the index image K and its depth Z (.npz)"
-
-
-def _colour(value: str) -> tuple[float, float, float]:
-    try:
-        parts = tuple(float(v) for v in value.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected R,G,B numbers, got {value!r}") from None
-    if len(parts) != 3:
-        raise argparse.ArgumentTypeError(f"expected three numbers R,G,B, got {value!r}")
-    return parts  # type: ignore[return-value]
 
 
 def _side(value: str) -> int:
@@ -53,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--width", type=_side, help="render at this width (focal lengths scale with it)")
     parser.add_argument("--height", type=_side, help="render at this height (default: keeps the aspect ratio)")
-    parser.add_argument("--background", type=_colour, default=(0.0, 0.0, 0.0), metavar="R,G,B", help="background colour in [0, 1] (default 0,0,0)")
+    parser.add_argument("--background", type=number_triple("R,G,B"), default=(0.0, 0.0, 0.0), metavar="R,G,B", help="background colour in [0, 1] (default 0,0,0)")
 
 
 def run(args: argparse.Namespace) -> int:
