@@ -4,6 +4,10 @@ The SPZ and compressed PLY files are written by the test-side encoders
 (tests/reference/format_encoders.py); the others by our own writers. A row's rate is splats per
 second of `load_scene` (file read, decompression, decoding and scene validation), best of 5.
 Peak memory of a 1M load is measured in a fresh process, as in bench_io.
+
+SPZ SH bytes are written two ways: all 8 bits (the worst case for the decompressor: the synthetic
+SH are random) and rounded to 5 bits (degree 1) and 4 bits (higher), as the reference SPZ writer
+does by default. A second table splits a gzipped SPZ load into its stages, to show what bounds it.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import sys
 import tempfile
 import time
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,7 +23,9 @@ import numpy as np
 from _table import best_time, print_table
 from bench_io import peak_load_bytes, synthetic_scene
 
-from sketchrodgs import GaussianScene, load_scene, save_scene
+from sketchrodgs import GaussianScene, _core, load_scene, save_scene
+from sketchrodgs.io import spz
+from sketchrodgs.io._quantized import empty_scene_arrays, map_file
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -28,11 +35,14 @@ SIZES = (100_000, 1_000_000)
 TARGETS = {"splat": 20.0, "spz": 5.0, "compressed-ply": 5.0}  # M splats/s the issue asks for
 
 
-def spz_writer(version: int) -> Callable[[GaussianScene, Path], None]:
+REFERENCE_SH_BITS = (5, 4)  # what the reference SPZ writer keeps of SH bytes by default
+
+
+def spz_writer(version: int, sh_bits: tuple[int, int] = (8, 8)) -> Callable[[GaussianScene, Path], None]:
     def write(scene: GaussianScene, path: Path) -> None:
         # SPZ holds positions to +-2048 at 12 fractional bits and SH in (-1, 1)
         path.write_bytes(encode_spz(scene.means, scene.scales, scene.quats, scene.opacities,
-                                    np.clip(scene.sh, -0.99, 0.99), version=version))
+                                    np.clip(scene.sh, -0.99, 0.99), version=version, sh_bits=sh_bits))
     return write
 
 
@@ -49,9 +59,13 @@ CASES = [
     ("compressed .ply", "compressed-ply", ".ply", 3, compressed_writer),
     ("SPZ v2 (gzip)", "spz", ".spz", 0, spz_writer(2)),
     ("SPZ v3 (gzip)", "spz", ".spz", 0, spz_writer(3)),
-    ("SPZ v3 (gzip)", "spz", ".spz", 3, spz_writer(3)),
+    ("SPZ v2 (gzip), SH 8 bits", "spz", ".spz", 3, spz_writer(2)),
+    ("SPZ v2 (gzip), SH 5/4 bits", "spz", ".spz", 3, spz_writer(2, REFERENCE_SH_BITS)),
+    ("SPZ v3 (gzip), SH 8 bits", "spz", ".spz", 3, spz_writer(3)),
+    ("SPZ v3 (gzip), SH 5/4 bits", "spz", ".spz", 3, spz_writer(3, REFERENCE_SH_BITS)),
     ("SPZ v4 (zstd)", "spz", ".spz", 0, spz_writer(4)),
-    ("SPZ v4 (zstd)", "spz", ".spz", 3, spz_writer(4)),
+    ("SPZ v4 (zstd), SH 8 bits", "spz", ".spz", 3, spz_writer(4)),
+    ("SPZ v4 (zstd), SH 5/4 bits", "spz", ".spz", 3, spz_writer(4, REFERENCE_SH_BITS)),
 ]
 
 
@@ -82,9 +96,40 @@ def splat_breakdown(path: Path) -> list[list[object]]:
     ]
 
 
+def gzip_breakdown(path: Path) -> list[list[object]]:
+    """Stages of a gzipped SPZ load: inflation (libdeflate; stdlib zlib for comparison), decoding
+    into fresh arrays, validation."""
+    raw = map_file(path)
+    header, payload = spz._inflate_gzipped(raw)
+    n, k = header.count, (min(header.sh_degree, 3) + 1) ** 2
+    sh_bytes = 3 * spz.SH_DIM[header.sh_degree]
+    inflated = np.empty(spz.LEGACY_HEADER.size + len(payload), dtype=np.uint8)
+    inflate_s = best_time(lambda: _core.gunzip_into(raw, inflated), repeat=5)
+    zlib_s = best_time(lambda: zlib.decompress(raw, wbits=31), repeat=3)
+
+    def decode() -> tuple[np.ndarray, ...]:
+        arrays = empty_scene_arrays(n, k)
+        _core.decode_spz(payload, header.version, sh_bytes, header.fractional_bits, arrays)
+        return arrays
+
+    decode_s = best_time(decode, repeat=5)
+    arrays = decode()
+    check_s = best_time(lambda: GaussianScene(*arrays), repeat=5)
+    total = best_time(lambda: load_scene(path), repeat=5)
+    mb = len(inflated) / 1e6
+    return [
+        [f"inflate {mb:.0f} MB (libdeflate)", f"{inflate_s * 1e3:.1f}", f"{mb / inflate_s:.0f} MB/s", f"{n / inflate_s / 1e6:.1f}"],
+        ["  the same with stdlib zlib, for scale", f"{zlib_s * 1e3:.1f}", f"{mb / zlib_s:.0f} MB/s", f"{n / zlib_s / 1e6:.1f}"],
+        ["decode into fresh arrays (Rust, all cores)", f"{decode_s * 1e3:.1f}", "", ""],
+        ["GaussianScene validation", f"{check_s * 1e3:.1f}", "", ""],
+        ["load_scene, whole", f"{total * 1e3:.1f}", "", f"{n / total / 1e6:.1f}"],
+    ]
+
+
 def main() -> None:
     rows = []
     breakdown: list[list[object]] = []
+    gzip_stages: list[list[object]] = []
     with tempfile.TemporaryDirectory() as tmp:
         for n in SIZES:
             scenes = {degree: synthetic_scene(n, degree) for degree in (0, 3)}
@@ -97,6 +142,8 @@ def main() -> None:
                 rows.append(rate_row(label, fmt, degree, path, n, peak=n == SIZES[-1]))
                 if fmt == "splat" and n == SIZES[-1]:
                     breakdown = splat_breakdown(path)
+                if label == "SPZ v3 (gzip), SH 8 bits" and n == SIZES[-1]:
+                    gzip_stages = gzip_breakdown(path)
                 path.unlink()
     data = ROOT / "tests" / "data"
     for name, label, fmt in (("guitar.compressed.ply", "guitar (real)", "compressed-ply"),
@@ -112,6 +159,9 @@ def main() -> None:
     )
     if breakdown:
         print_table(f".splat load of {SIZES[-1]:,} splats, ms (best of 7)", ["stage", "ms"], breakdown)
+    if gzip_stages:
+        print_table(f"SPZ v3 (gzip, SH 3, 8-bit SH) load of {SIZES[-1]:,} splats by stage",
+                    ["stage", "ms", "bytes/s", "M splat/s if alone"], gzip_stages)
 
 
 if __name__ == "__main__":

@@ -150,6 +150,23 @@ def test_spz_from_the_test_encoder_decodes_within_quantisation(tmp_path, version
     assert_same_rotations(got.quats, scene.quats, 0.99 if version == 2 else 0.99998)
 
 
+@pytest.mark.parametrize("version", [2, 3, 4])
+def test_spz_decodes_across_parallel_blocks_with_reference_sh_rounding(tmp_path, version):
+    # more splats than three of the decoder's parallel blocks, the last one partial; SH bytes
+    # rounded as the reference writer does by default (5 bits for degree 1, 4 above)
+    n = 50_000
+    scene = bounded_scene(n, 2, seed=version)
+    raw = encode_spz(*scene_arrays(scene), version=version, sh_bits=(5, 4))
+    got = load_scene(write(tmp_path, "big.spz", raw))
+    np.testing.assert_allclose(got.means, scene.means, atol=0.5 / 4096 + 1e-9)
+    np.testing.assert_allclose(np.log(got.scales), np.log(scene.scales), atol=0.5 / 16 + 1e-6)
+    np.testing.assert_allclose(got.opacities, scene.opacities, atol=0.5 / 255 + 1e-6)
+    np.testing.assert_allclose(got.sh[:, 0], scene.sh[:, 0], atol=0.5 / (0.15 * 255) + 1e-6)
+    np.testing.assert_allclose(got.sh[:, 1:4], scene.sh[:, 1:4], atol=4.5 / 128 + 1e-6)  # buckets of 8
+    np.testing.assert_allclose(got.sh[:, 4:], scene.sh[:, 4:], atol=8.5 / 128 + 1e-6)  # buckets of 16
+    assert_same_rotations(got.quats, scene.quats, 0.99 if version == 2 else 0.99998)
+
+
 def test_spz_golden_bytes_decode_to_exact_values(tmp_path):
     # One splat, written byte by byte from the format description.
     position = bytes([0x00, 0x08, 0x00,   # x = +2048 / 2^12 = 0.5
@@ -245,6 +262,17 @@ def test_compressed_ply_from_the_test_encoder_decodes_within_quantisation(tmp_pa
     rgb_step = chunk_ranges(rgb) / 255 if chunk_colors else 1 / 255
     assert np.all(np.abs(got_rgb - rgb) <= rgb_step / 2 + 1e-6)
     np.testing.assert_allclose(got.sh[:, 1:], scene.sh[:, 1:], atol=8 / 256 + 1e-6)
+    assert_same_rotations(got.quats, scene.quats, 0.99999)
+
+
+def test_compressed_ply_decodes_across_parallel_blocks(tmp_path):
+    n = 3 * 16384 + 77  # more than three of the decoder's blocks of whole chunks, the last partial
+    scene = random_scene(n, 1, seed=9)
+    got = load_scene(write(tmp_path, "big.ply", encode_compressed_ply(*scene_arrays(scene))))
+    step = chunk_ranges(scene.means.astype(np.float64)) / np.array([2047, 1023, 2047])
+    assert np.all(np.abs(got.means - scene.means) <= step / 2 + 1e-6)
+    np.testing.assert_allclose(got.opacities, scene.opacities, atol=0.5 / 255 + 1e-6)
+    np.testing.assert_allclose(got.sh[:, 1:], np.clip(scene.sh[:, 1:], -4, 4), atol=8 / 256 + 1e-6)
     assert_same_rotations(got.quats, scene.quats, 0.99999)
 
 

@@ -123,3 +123,18 @@ def skin_scatter(
     means: npt.NDArray[np.float32],
     quats: npt.NDArray[np.float32],
 ) -> None: ...
+
+F32 = npt.NDArray[np.float32]
+# means (N, 3), scales (N, 3), quats (N, 4), opacities (N,), sh (N, K, 3), filled by the decoders
+SceneArrays = tuple[F32, F32, F32, F32, F32]
+
+def gunzip_into(raw: npt.NDArray[np.uint8], out: npt.NDArray[np.uint8]) -> int | None: ...
+def decode_spz(
+    payload: npt.NDArray[np.uint8], version: int, sh_bytes_per_splat: int, fractional_bits: int, out: SceneArrays
+) -> None: ...
+def decode_compressed_ply(
+    bounds: npt.NDArray[np.float64], packed: npt.NDArray[np.uint8], sh_rest: npt.NDArray[np.uint8], out: SceneArrays
+) -> None: ...
+def scene_summary(
+    means: F32, scales: F32, quats: F32, opacities: F32, sh: F32
+) -> tuple[list[bool], float, tuple[float, float], tuple[float, float]]: ...

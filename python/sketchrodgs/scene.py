@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _core
 from .errors import SceneFormatError
 
 # Unit quaternions are checked to this tolerance; loaders normalise before constructing.
@@ -51,16 +52,21 @@ class GaussianScene:
         sh = _as_float32(self, "sh")
         if sh.ndim != 3 or sh.shape[0] != n or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
             raise SceneFormatError(f"sh: expected shape ({n}, K, 3) with K in 1, 4, 9, 16, got {sh.shape}")
-        for name in ("means", "scales", "quats", "opacities", "sh"):
-            _check_finite(name, getattr(self, name))
-        # Cheap whole-array checks first; row masks are built only to name a bad row.
-        if n and self.scales.min() <= 0:
+        # One pass in Rust over all arrays; rows are looked for only when something is off.
+        fields = ("means", "scales", "quats", "opacities", "sh")
+        finite, scale_min, (opacity_min, opacity_max), (quat_min, quat_max) = _core.scene_summary(
+            *(getattr(self, name) for name in fields)
+        )
+        for name, ok in zip(fields, finite, strict=True):
+            if not ok:
+                rows = getattr(self, name).reshape(n, -1)
+                _first_bad(name, ~np.isfinite(rows).all(axis=1), "NaN or infinite value")
+        if n and scale_min <= 0:
             _first_bad("scales", ~(self.scales > 0).all(axis=1), "scales must be > 0")
-        if n and (self.opacities.min() < 0 or self.opacities.max() > 1):
+        if n and (opacity_min < 0 or opacity_max > 1):
             _first_bad("opacities", ~((self.opacities >= 0) & (self.opacities <= 1)), "opacity must be in [0, 1]")
-        squared = np.einsum("ij,ij->i", self.quats, self.quats)
-        if n and (squared.min() < (1 - QUAT_NORM_TOLERANCE) ** 2 or squared.max() > (1 + QUAT_NORM_TOLERANCE) ** 2):
-            norms = np.sqrt(squared)
+        if n and (quat_min < (1 - QUAT_NORM_TOLERANCE) ** 2 or quat_max > (1 + QUAT_NORM_TOLERANCE) ** 2):
+            norms = np.sqrt(np.einsum("ij,ij->i", self.quats, self.quats))
             _first_bad("quats", norms == 0, "zero quaternion")
             _first_bad("quats", np.abs(norms - 1) > QUAT_NORM_TOLERANCE, "quaternion is not unit length")
 
@@ -122,13 +128,6 @@ def _as_rows(scene: GaussianScene, name: str, width: int, n: int | None = None) 
         want = f"({'N' if n is None else n}, {width})"
         raise SceneFormatError(f"{name}: expected shape {want}, got {array.shape}")
     return int(array.shape[0])
-
-
-def _check_finite(name: str, array: np.ndarray) -> None:
-    # min/max propagate NaN and expose inf without allocating a boolean copy of the array
-    if array.size and not (np.isfinite(array.min()) and np.isfinite(array.max())):
-        bad = ~np.isfinite(array.reshape(array.shape[0], -1)).all(axis=1)
-        _first_bad(name, bad, "NaN or infinite value")
 
 
 def _first_bad(name: str, bad_rows: np.ndarray, what: str) -> None:

@@ -36,11 +36,14 @@ def spz_blocks(
     sh: np.ndarray,
     version: int,
     fractional_bits: int = 12,
+    sh_bits: tuple[int, int] = (8, 8),
 ) -> list[bytes]:
     """The six attribute blocks (positions, alphas, colours, scales, rotations, SH) of `version`.
 
     Inputs are activated: scales linear, quats (N, 4) w first, opacities in [0, 1], sh (N, K, 3)
     with sh[:, 0] the DC term. SH rows are coefficient-major with RGB inner, as SPZ stores them.
+    `sh_bits` are the bits kept of the degree-1 and of the higher SH bytes; the reference writer
+    keeps (5, 4) by default, rounding each byte to a multiple of 2^(8 - bits).
     """
     n = len(means)
     fixed = np.rint(np.asarray(means, np.float64) * (1 << fractional_bits)).astype(np.int64)
@@ -65,8 +68,11 @@ def spz_blocks(
             magnitude = np.floor(511 * (np.abs(xyzw[:, k]) / math.sqrt(0.5)) + 0.5).astype(np.uint32)
             word = np.where(largest == k, word, (word << 10) | (negbit << 9) | magnitude)
         rotations = word.astype("<u4").view(np.uint8).reshape(n, 4)
-    rest = np.asarray(sh[:, 1:], np.float64)
-    sh_bytes = np.clip(np.rint(rest * 128 + 128), 0, 255).astype(np.uint8)
+    rest = np.rint(np.asarray(sh[:, 1:], np.float64) * 128 + 128)
+    for band, bits in ((slice(0, 3), sh_bits[0]), (slice(3, None), sh_bits[1])):
+        bucket = 1 << (8 - bits)
+        rest[:, band] = np.floor((rest[:, band] + bucket / 2) / bucket) * bucket
+    sh_bytes = np.clip(rest, 0, 255).astype(np.uint8)
     return [a.tobytes() for a in (positions, alphas, colors, log_scales, rotations, sh_bytes)]
 
 
@@ -98,11 +104,12 @@ def spz_v4(blocks: list[bytes], count: int, sh_degree: int, fractional_bits: int
     return header + extensions + toc + b"".join(frames)
 
 
-def encode_spz(means, scales, quats, opacities, sh, version: int = 4, fractional_bits: int = 12) -> bytes:
+def encode_spz(means, scales, quats, opacities, sh, version: int = 4, fractional_bits: int = 12,
+               sh_bits: tuple[int, int] = (8, 8)) -> bytes:
     """A whole `.spz` file of `version` (2, 3 or 4) for the given activated arrays."""
     sh = np.asarray(sh)
     degree = {1: 0, 4: 1, 9: 2, 16: 3, 25: 4}[sh.shape[1]]
-    blocks = spz_blocks(means, scales, quats, opacities, sh, version, fractional_bits)
+    blocks = spz_blocks(means, scales, quats, opacities, sh, version, fractional_bits, sh_bits)
     if version == 4:
         return spz_v4(blocks, len(means), degree, fractional_bits)
     return spz_gzip(blocks, len(means), degree, version, fractional_bits)

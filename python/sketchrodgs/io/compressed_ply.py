@@ -17,6 +17,9 @@ min/max of x, y, z, of the log scales, and (in newer files) of the colours r, g,
 An optional element `sh` holds uchar `f_rest_0..f_rest_{n-1}` (n = 9, 24 or 45, channel-major
 like the INRIA PLY); byte b stands for 8 * ((b + 0.5) / 256 - 0.5), with 0 and 255 meaning -4
 and 4. Axes are those of the INRIA PLY (the writers convert to them), so nothing is flipped.
+
+plyfile maps the file and checks its structure; the splats are decoded in Rust
+(`sketchrodgs-formats`), a block of whole chunks per core.
 """
 
 from __future__ import annotations
@@ -27,9 +30,10 @@ import os
 import numpy as np
 import plyfile
 
+from .. import _core
 from ..errors import SceneFormatError
-from ..scene import SH_C0, GaussianScene, sh_coefficient_count
-from ._quantized import SmallestThree, block_size, blocks, byte_table, lookup
+from ..scene import GaussianScene, sh_coefficient_count
+from ._quantized import empty_scene_arrays
 from .ply import _check_header
 
 CHUNK_SIZE = 256
@@ -39,12 +43,7 @@ CHUNK_COLOR_BOUNDS = ("min_r", "min_g", "min_b", "max_r", "max_g", "max_b")
 PACKED = ("packed_position", "packed_rotation", "packed_scale", "packed_color")
 _REST_COUNT_TO_DEGREE = {3 * (sh_coefficient_count(d) - 1): d for d in (1, 2, 3)}
 
-_UNIT_8 = np.arange(256, dtype=np.float64) / 255
-_UNIT_8_F32 = _UNIT_8.astype(np.float32)
-_SH_BYTE = byte_table(lambda b: 8 * (np.where(b == 0, 0, np.where(b == 255, 1, (b + 0.5) / 256)) - 0.5))
-_UNIT_10 = np.arange(1024, dtype=np.float64) / 1023
-_UNIT_11 = np.arange(2048, dtype=np.float64) / 2047
-_ROTATION_10 = ((_UNIT_10 - 0.5) * math.sqrt(2)).astype(np.float32)
+_PACKED_RECORD = np.dtype([(name, "<u4") for name in PACKED])
 
 
 def read_compressed_ply(path: str | os.PathLike[str]) -> GaussianScene:
@@ -80,77 +79,27 @@ def decode_compressed_ply(data: plyfile.PlyData, source: str) -> GaussianScene:
     chunk_names = {prop.name for prop in chunk.properties}
     has_colors = all(name in chunk_names for name in CHUNK_COLOR_BOUNDS)
     bounds = _columns(chunk, CHUNK_BOUNDS + (CHUNK_COLOR_BOUNDS if has_colors else ()), "f", source)
-    packed = _columns(vertex, PACKED, "u", source)
-    rest = None
+    packed = _packed(vertex, source)
+    k = 1
+    rest = np.empty((n, 0), dtype=np.uint8)
     if "sh" in elements:
         rest = _sh_bytes(elements["sh"], n, source)
-
-    means = np.empty((n, 3), dtype=np.float32)
-    scales = np.empty((n, 3), dtype=np.float32)
-    quats = np.empty((n, 4), dtype=np.float32)
-    opacities = np.empty(n, dtype=np.float32)
-    k = 1 if rest is None else rest.shape[1] // 3 + 1
-    sh = np.empty((n, k, 3), dtype=np.float32)
-    smallest_three = SmallestThree(wxyz=(0, 1, 2, 3))  # components in rot_0..rot_3 order
-    chunks_per_block = block_size(60 + 12 * k) // CHUNK_SIZE
-    fraction = np.zeros(chunks_per_block * CHUNK_SIZE, dtype=np.float64)
-    sh_block = np.empty((chunks_per_block * CHUNK_SIZE, k, 3), dtype=np.float32)
-    rgb = np.empty((chunks_per_block * CHUNK_SIZE, 3), dtype=np.float32)
-    rest_values = np.empty(chunks_per_block * CHUNK_SIZE * 3 * (k - 1), dtype=np.float32)
-    # Blocks of whole chunks, so that a chunk's bounds broadcast over its splats when a block is
-    # viewed as (chunks, 256); the last chunk is padded, and the padding cut off.
-    for first, last in blocks(chunks, chunks_per_block):
-        start, stop = first * CHUNK_SIZE, min(n, last * CHUNK_SIZE)
-        size = stop - start
-        chunk_bounds = {name: values[first:last, None] for name, values in bounds.items()}
-        grid = fraction[:(last - first) * CHUNK_SIZE]
-        position = packed["packed_position"][start:stop]
-        scale = packed["packed_scale"][start:stop]
-        for axis, (name, shift, table) in enumerate((("x", 21, _UNIT_11), ("y", 11, _UNIT_10), ("z", 0, _UNIT_11))):
-            mask = len(table) - 1
-            means[start:stop, axis] = _lerp(chunk_bounds, name, table, (position >> shift) & mask, grid)
-            scales[start:stop, axis] = _lerp(chunk_bounds, f"scale_{name}", table, (scale >> shift) & mask, grid)
-        color = packed["packed_color"][start:stop]
-        colors = rgb[:size]
-        for channel, (name, shift) in enumerate((("r", 24), ("g", 16), ("b", 8))):
-            byte = (color >> shift) & 0xFF
-            if has_colors:
-                colors[:, channel] = _lerp(chunk_bounds, name, _UNIT_8, byte, grid)
-            else:
-                lookup(_UNIT_8_F32, byte, colors[:, channel])
-        np.divide(color & 0xFF, np.float32(255), out=opacities[start:stop], dtype=np.float32)
-        rows = sh_block[:size]
-        np.subtract(colors, np.float32(0.5), out=rows[:, 0])  # rgb = 0.5 + SH_C0 * f_dc
-        rows[:, 0] /= np.float32(SH_C0)
-        if rest is not None:
-            # channel-major: f_rest_{c*(K-1)+j} is basis j+1 of channel c
-            values = rest_values[: size * 3 * (k - 1)].reshape(size, 3, k - 1)
-            lookup(_SH_BYTE, rest[start:stop].reshape(size, 3, k - 1), values)  # both contiguous: fast
-            rows[:, 1:] = values.transpose(0, 2, 1)
-        sh[start:stop] = rows
-        rotation = packed["packed_rotation"][start:stop]
-        stored = smallest_three.stored(size)
-        for row, shift in enumerate((20, 10, 0)):
-            lookup(_ROTATION_10, (rotation >> shift) & 0x3FF, stored[row])
-        smallest_three.finish(rotation >> 30, quats[start:stop])
-    with np.errstate(over="ignore"):
-        np.exp(scales, out=scales)  # the chunk bounds hold log scales
+        k = rest.shape[1] // 3 + 1
+    arrays = empty_scene_arrays(n, k)
+    _core.decode_compressed_ply(np.stack(list(bounds.values()), axis=1), packed, rest, arrays)
     try:
-        return GaussianScene(means, scales, quats, opacities, sh)
+        return GaussianScene(*arrays)
     except SceneFormatError as exc:
         raise SceneFormatError(f"{source}: {exc}") from None
 
 
-def _lerp(
-    bounds: dict[str, np.ndarray], name: str, table: np.ndarray, index: np.ndarray, grid: np.ndarray
-) -> np.ndarray:
-    """Each chunk's min_<name>..max_<name> at t = table[index], computed as the PlayCanvas decoder
-    does (min * (1 - t) + max * t in float64), the chunk bounds broadcast over its 256 splats."""
-    size = len(index)
-    lookup(table, index, grid[:size])
-    t = grid.reshape(-1, CHUNK_SIZE)  # the padding past `size` is cut off below
-    low, high = bounds[f"min_{name}"], bounds[f"max_{name}"]
-    return (low * (1 - t) + high * t).reshape(-1)[:size]
+def _packed(vertex: plyfile.PlyElement, source: str) -> np.ndarray:
+    """(N, 16) uint8: per splat position, rotation, scale and colour as little-endian uint32. A view of
+    the mapped file when its rows are exactly these four, else a converted copy."""
+    if vertex.data.dtype == _PACKED_RECORD:
+        return vertex.data.view(np.uint8).reshape(-1, 16)
+    columns = _columns(vertex, PACKED, "u", source)
+    return np.stack([columns[name] for name in PACKED], axis=1).astype("<u4").view(np.uint8)
 
 
 def _columns(element: plyfile.PlyElement, names: tuple[str, ...], kind: str, source: str) -> dict[str, np.ndarray]:

@@ -32,7 +32,7 @@ pub fn no_panic<T>(what: &str, f: impl FnOnce() -> T) -> PyResult<T> {
 }
 
 /// Reinterpret a flat row-major slice as fixed-size rows (the caller checked the shape).
-pub fn as_rows<const K: usize>(flat: &[f32]) -> &[[f32; K]] {
+pub fn as_rows<T, const K: usize>(flat: &[T]) -> &[[T; K]] {
     let (rows, _) = flat.as_chunks::<K>();
     rows
 }

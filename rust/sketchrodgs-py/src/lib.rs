@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod errors;
+mod formats;
 mod path;
 mod polyline;
 mod pool;
@@ -18,6 +19,7 @@ mod skin;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    formats::register(m)?;
     path::register(m)?;
     polyline::register(m)?;
     pool::register(m)?;

@@ -1,0 +1,159 @@
+//! Bindings for `sketchrodgs-formats`: `_core.gunzip_into`, `_core.decode_spz`,
+//! `_core.decode_compressed_ply`, `_core.scene_summary`. Decoders write into arrays the caller
+//! allocated.
+
+use numpy::{PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use sketchrodgs_formats::{SplatsMut, compressed_ply, gzip, spz, summary};
+
+use crate::arrays::{as_rows, check_shape, contiguous};
+use crate::errors::SketchRodGSError;
+use crate::pool::run_parallel;
+
+/// Inflate the gzip member in `raw` (uint8) into `out` (uint8). Returns the number of bytes
+/// written, or None when the stream holds more than `out` does.
+#[pyfunction]
+fn gunzip_into(py: Python<'_>, raw: &Bound<'_, PyArray1<u8>>, out: &Bound<'_, PyArray1<u8>>) -> PyResult<Option<usize>> {
+    let raw = raw.try_readonly()?;
+    let mut out = out.try_readwrite()?;
+    let raw = contiguous(&raw, "raw")?;
+    let out = out.as_slice_mut().map_err(|_| SketchRodGSError::new_err("out: expected a C-contiguous array"))?;
+    match run_parallel(py, "gunzip_into", || gzip::gunzip_into(raw, out))? {
+        Ok(written) => Ok(Some(written)),
+        Err(gzip::GunzipError::TooLong(_)) => Ok(None),
+        Err(error) => Err(SketchRodGSError::new_err(error.to_string())),
+    }
+}
+
+/// The scene arrays a decoder fills, as Python passes them: means (N, 3), scales (N, 3), quats
+/// (N, 4), opacities (N,), sh (N, K, 3), all float32.
+type SceneArrays<'py> = (
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray3<f32>>,
+);
+
+/// The scene arrays, borrowed for writing and checked for shape.
+struct SplatArrays<'py> {
+    means: numpy::PyReadwriteArray2<'py, f32>,
+    scales: numpy::PyReadwriteArray2<'py, f32>,
+    quats: numpy::PyReadwriteArray2<'py, f32>,
+    opacities: numpy::PyReadwriteArray1<'py, f32>,
+    sh: numpy::PyReadwriteArray3<'py, f32>,
+}
+
+impl<'py> SplatArrays<'py> {
+    fn new((means, scales, quats, opacities, sh): &SceneArrays<'py>) -> PyResult<Self> {
+        let arrays = SplatArrays {
+            means: means.try_readwrite()?,
+            scales: scales.try_readwrite()?,
+            quats: quats.try_readwrite()?,
+            opacities: opacities.try_readwrite()?,
+            sh: sh.try_readwrite()?,
+        };
+        let n = arrays.opacities.shape()[0];
+        check_shape("means", arrays.means.shape(), &[Some(n), Some(3)])?;
+        check_shape("scales", arrays.scales.shape(), &[Some(n), Some(3)])?;
+        check_shape("quats", arrays.quats.shape(), &[Some(n), Some(4)])?;
+        check_shape("sh", arrays.sh.shape(), &[Some(n), None, Some(3)])?;
+        Ok(arrays)
+    }
+
+    fn count(&self) -> usize {
+        self.opacities.shape()[0]
+    }
+
+    fn slices(&mut self) -> PyResult<SplatsMut<'_>> {
+        fn slice<'a, D: numpy::ndarray::Dimension>(
+            array: &'a mut numpy::PyReadwriteArray<'_, f32, D>,
+            name: &str,
+        ) -> PyResult<&'a mut [f32]> {
+            array.as_slice_mut().map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
+        }
+        let sh_coefficients = self.sh.shape()[1];
+        Ok(SplatsMut {
+            means: slice(&mut self.means, "means")?,
+            scales: slice(&mut self.scales, "scales")?,
+            quats: slice(&mut self.quats, "quats")?,
+            opacities: slice(&mut self.opacities, "opacities")?,
+            sh: slice(&mut self.sh, "sh")?,
+            sh_coefficients,
+        })
+    }
+}
+
+/// Decode the inflated SPZ attribute blocks in `payload` (uint8, file order, `sh_bytes_per_splat`
+/// SH bytes per splat) into the scene arrays `out`; `version` picks the rotation encoding.
+#[pyfunction]
+fn decode_spz<'py>(
+    py: Python<'py>,
+    payload: &Bound<'py, PyArray1<u8>>,
+    version: u32,
+    sh_bytes_per_splat: usize,
+    fractional_bits: u8,
+    out: SceneArrays<'py>,
+) -> PyResult<()> {
+    let payload = payload.try_readonly()?;
+    let payload = contiguous(&payload, "payload")?;
+    let mut arrays = SplatArrays::new(&out)?;
+    let rotations = if version == 2 { spz::Rotations::XyzBytes } else { spz::Rotations::SmallestThree };
+    let attributes = spz::Attributes::split(payload, arrays.count(), rotations, sh_bytes_per_splat, fractional_bits)
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let out = arrays.slices()?;
+    run_parallel(py, "decode_spz", || spz::decode(&attributes, out))?.map_err(|e| SketchRodGSError::new_err(e.to_string()))
+}
+
+/// Decode a compressed PLY: `bounds` (chunks, 12 or 18) float64, `packed` (N, 16) uint8 (four
+/// little-endian uint32: position, rotation, scale, colour), `sh_rest` (N, 3 * (K - 1)) uint8,
+/// into the scene arrays `out`.
+#[pyfunction]
+fn decode_compressed_ply<'py>(
+    py: Python<'py>,
+    bounds: &Bound<'py, PyArray2<f64>>,
+    packed: &Bound<'py, PyArray2<u8>>,
+    sh_rest: &Bound<'py, PyArray2<u8>>,
+    out: SceneArrays<'py>,
+) -> PyResult<()> {
+    let (bounds, packed, sh_rest) = (bounds.try_readonly()?, packed.try_readonly()?, sh_rest.try_readonly()?);
+    check_shape("packed", packed.shape(), &[None, Some(16)])?;
+    let bound_columns = bounds.shape()[1];
+    let (bounds, packed, sh_rest) = (contiguous(&bounds, "bounds")?, contiguous(&packed, "packed")?, contiguous(&sh_rest, "sh_rest")?);
+    let packed = compressed_ply::Packed { bounds, bound_columns, splats: as_rows(packed), sh_rest };
+    let mut arrays = SplatArrays::new(&out)?;
+    let out = arrays.slices()?;
+    run_parallel(py, "decode_compressed_ply", || compressed_ply::decode(&packed, out))?
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))
+}
+
+type Summary = ([bool; 5], f32, (f32, f32), (f32, f32));
+
+/// What validating a scene needs, in one pass over its C-contiguous float32 arrays (means,
+/// scales, quats, opacities, sh): (finite per array, smallest scale, (min, max) opacity,
+/// (min, max) squared quaternion length).
+#[pyfunction]
+fn scene_summary<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyArrayDyn<f32>>,
+    scales: &Bound<'py, PyArrayDyn<f32>>,
+    quats: &Bound<'py, PyArrayDyn<f32>>,
+    opacities: &Bound<'py, PyArrayDyn<f32>>,
+    sh: &Bound<'py, PyArrayDyn<f32>>,
+) -> PyResult<Summary> {
+    let arrays = [means, scales, quats, opacities, sh].map(|a| a.try_readonly());
+    let [means, scales, quats, opacities, sh] = arrays;
+    let (means, scales, quats, opacities, sh) = (means?, scales?, quats?, opacities?, sh?);
+    let (means, scales, quats) = (contiguous(&means, "means")?, contiguous(&scales, "scales")?, contiguous(&quats, "quats")?);
+    let (opacities, sh) = (contiguous(&opacities, "opacities")?, contiguous(&sh, "sh")?);
+    let found = run_parallel(py, "scene_summary", || summary::summarize(means, scales, quats, opacities, sh))?;
+    Ok((found.finite, found.scale_min, found.opacity_range, found.quat_length_squared_range))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(gunzip_into, m)?)?;
+    m.add_function(wrap_pyfunction!(decode_spz, m)?)?;
+    m.add_function(wrap_pyfunction!(decode_compressed_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(scene_summary, m)?)?;
+    Ok(())
+}
