@@ -6,6 +6,7 @@ from __future__ import annotations
 import gzip
 import json
 import math
+import os
 import struct
 import subprocess
 import sys
@@ -165,6 +166,27 @@ def test_spz_decodes_across_parallel_blocks_with_reference_sh_rounding(tmp_path,
     np.testing.assert_allclose(got.sh[:, 1:4], scene.sh[:, 1:4], atol=4.5 / 128 + 1e-6)  # buckets of 8
     np.testing.assert_allclose(got.sh[:, 4:], scene.sh[:, 4:], atol=8.5 / 128 + 1e-6)  # buckets of 16
     assert_same_rotations(got.quats, scene.quats, 0.99 if version == 2 else 0.99998)
+
+
+def test_big_gzipped_spz_reads_the_same_on_one_thread_and_on_two(tmp_path):
+    # over 2 MiB of gzip: with two threads the stream is inflated in two parts (gzip.rs)
+    scene = bounded_scene(60_000, 3, seed=11)
+    path = write(tmp_path, "big.spz", encode_spz(*scene_arrays(scene), version=3))
+    assert path.stat().st_size > 2 << 20
+    script = textwrap.dedent("""
+        import sys, numpy as np, sketchrodgs
+        s = sketchrodgs.load_scene(sys.argv[1])
+        np.savez(sys.argv[2], means=s.means, scales=s.scales, quats=s.quats, opacities=s.opacities, sh=s.sh)
+    """)
+    loaded = {}
+    for threads in ("1", "2"):
+        target = tmp_path / f"threads{threads}.npz"
+        env = dict(os.environ, SKETCHRODGS_NUM_THREADS=threads)
+        subprocess.run([sys.executable, "-c", script, str(path), str(target)], env=env, check=True, timeout=120)
+        loaded[threads] = np.load(target)
+    for name in ("means", "scales", "quats", "opacities", "sh"):
+        np.testing.assert_array_equal(loaded["1"][name], loaded["2"][name], err_msg=name)
+    np.testing.assert_allclose(loaded["2"]["sh"][:, 1:], scene.sh[:, 1:], atol=SH_STEP_SPZ / 2 + 1e-6)
 
 
 def test_spz_golden_bytes_decode_to_exact_values(tmp_path):

@@ -29,8 +29,8 @@ Extensions (vendor records) are skipped. SH degree 4 is read and its band 4 drop
 holds degree 3 at most). The antialiasing flag is ignored.
 
 The attributes are inflated into one buffer of the size the header declares (gzip by libdeflate,
-zstd by `zstandard`), so nothing past it is ever inflated, and decoded in Rust
-(`sketchrodgs-formats`), a block of splats per core.
+in a part per core for big streams; zstd by `zstandard`), so nothing past it is ever inflated,
+and decoded in Rust (`sketchrodgs-formats`), a block of splats per core.
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@
 use rayon::prelude::*;
 
 pub mod compressed_ply;
+mod deflate;
 pub mod gzip;
 pub mod spz;
 pub mod summary;

@@ -170,7 +170,9 @@ fn v2_rotation(t: &Tables, bytes: &[u8]) -> [f32; 4] {
 mod tests {
     use super::*;
 
-    fn decode_one(payload: &[u8], rotations: Rotations, sh_bytes: usize, k: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
+    type Arrays = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>);
+
+    fn decode_one(payload: &[u8], rotations: Rotations, sh_bytes: usize, k: usize) -> Arrays {
         let (mut means, mut scales, mut quats, mut opacities, mut sh) = (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 3 * k]);
         let attributes = Attributes::split(payload, 1, rotations, sh_bytes, 12).unwrap_or_else(|e| unreachable!("{e}"));
         let out = SplatsMut { means: &mut means, scales: &mut scales, quats: &mut quats, opacities: &mut opacities, sh: &mut sh, sh_coefficients: k };
