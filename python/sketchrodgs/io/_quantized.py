@@ -4,19 +4,10 @@ from __future__ import annotations
 
 import mmap
 import os
-from collections.abc import Iterator
 
 import numpy as np
 
 from ..errors import SceneFormatError
-
-BLOCK = 1 << 15  # splats per block for decoders that work in numpy: temporaries stay in cache
-
-
-def blocks(n: int, block: int = BLOCK) -> Iterator[tuple[int, int]]:
-    """(start, stop) of consecutive blocks covering range(n)."""
-    for start in range(0, n, block):
-        yield start, min(n, start + block)
 
 
 def map_file(path: str | os.PathLike[str]) -> np.ndarray:

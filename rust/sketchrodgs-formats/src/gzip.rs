@@ -75,7 +75,7 @@ fn gunzip_in_parts(raw: &[u8], out: &mut [u8], parts: usize) -> Option<usize> {
         return None;
     }
     let ends: Vec<usize> = starts.iter().copied().chain([bits]).collect();
-    let (capacity, last) = (out.len(), starts.len() - 1);
+    let last = starts.len() - 1;
     // The first part publishes its last WINDOW bytes, so that the second part can stop guessing.
     let (head_window, unknown) = (OnceLock::new(), OnceLock::new());
     let (head, later) = rayon::join(
@@ -83,7 +83,7 @@ fn gunzip_in_parts(raw: &[u8], out: &mut [u8], parts: usize) -> Option<usize> {
         || {
             (0..starts.len())
                 .into_par_iter()
-                .map(|j| inflate_part(data, starts[j], ends[j + 1], j == last, capacity, if j == 0 { &head_window } else { &unknown }))
+                .map(|j| inflate_part(data, starts[j], ends[j + 1], j == last, size, if j == 0 { &head_window } else { &unknown }))
                 .collect::<Option<Vec<_>>>()
         },
     );
@@ -149,7 +149,8 @@ struct Part {
 }
 
 /// The part of the stream from block start `start` to bit `end` (the next part's start, or the
-/// end of the data for the `last` part); it inflates to at most `capacity` bytes. `preceding`
+/// end of the data for the `last` part); it inflates to at most `capacity` bytes (the member's
+/// length: only the pages written are ever backed by memory). `preceding`
 /// receives the bytes before `start` once another thread has them.
 fn inflate_part(data: &[u8], start: usize, end: usize, last: bool, capacity: usize, preceding: &OnceLock<Vec<u8>>) -> Option<Part> {
     let partial = deflate::decode_from(data, start, if last { usize::MAX } else { end }, SPECULATIVE_LIMIT, preceding)?;

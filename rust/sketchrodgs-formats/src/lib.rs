@@ -1,6 +1,7 @@
-//! Decoders for the quantised Gaussian-splat formats: Niantic SPZ and the PlayCanvas compressed
-//! PLY. They turn the packed bytes of a file into activated float arrays (means, linear scales,
-//! unit w-first quaternions, opacities, SH coefficients), a block of splats per task in parallel.
+//! Decoders for the quantised Gaussian-splat formats: Niantic SPZ, the PlayCanvas compressed
+//! PLY and antimatter15 `.splat`. They turn the packed bytes of a file into activated float
+//! arrays (means, linear scales, unit w-first quaternions, opacities, SH coefficients), a block of
+//! splats per task in parallel.
 //!
 //! `summary` gives, in one parallel pass, what validating any scene's arrays needs.
 //!
@@ -13,6 +14,7 @@ use rayon::prelude::*;
 pub mod compressed_ply;
 mod deflate;
 pub mod gzip;
+pub mod splat;
 pub mod spz;
 pub mod summary;
 

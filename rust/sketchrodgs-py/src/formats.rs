@@ -1,10 +1,10 @@
 //! Bindings for `sketchrodgs-formats`: `_core.gunzip_into`, `_core.decode_spz`,
-//! `_core.decode_compressed_ply`, `_core.scene_summary`. Decoders write into arrays the caller
+//! `_core.decode_compressed_ply`, `_core.decode_splat`, `_core.scene_summary`. Decoders write into arrays the caller
 //! allocated.
 
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use sketchrodgs_formats::{SplatsMut, compressed_ply, gzip, spz, summary};
+use sketchrodgs_formats::{SplatsMut, compressed_ply, gzip, splat, spz, summary};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
 use crate::errors::SketchRodGSError;
@@ -127,6 +127,17 @@ fn decode_compressed_ply<'py>(
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))
 }
 
+/// Decode `.splat` records (uint8, 32 bytes each) into the scene arrays `out` (SH of the DC
+/// term only).
+#[pyfunction]
+fn decode_splat<'py>(py: Python<'py>, records: &Bound<'py, PyArray1<u8>>, out: SceneArrays<'py>) -> PyResult<()> {
+    let records = records.try_readonly()?;
+    let records = contiguous(&records, "records")?;
+    let mut arrays = SplatArrays::new(&out)?;
+    let out = arrays.slices()?;
+    run_parallel(py, "decode_splat", || splat::decode(records, out))?.map_err(|e| SketchRodGSError::new_err(e.to_string()))
+}
+
 type Summary = ([bool; 5], f32, (f32, f32), (f32, f32));
 
 /// What validating a scene needs, in one pass over its C-contiguous float32 arrays (means,
@@ -154,6 +165,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gunzip_into, m)?)?;
     m.add_function(wrap_pyfunction!(decode_spz, m)?)?;
     m.add_function(wrap_pyfunction!(decode_compressed_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(decode_splat, m)?)?;
     m.add_function(wrap_pyfunction!(scene_summary, m)?)?;
     Ok(())
 }
