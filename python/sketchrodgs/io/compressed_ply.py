@@ -117,7 +117,7 @@ def _columns(element: plyfile.PlyElement, names: tuple[str, ...], kind: str, sou
             raise SceneFormatError(f"{source}: compressed PLY property {name} must be a number, not {values.dtype}")
         if kind == "f":
             columns[name] = values.astype(np.float64)
-        else:  # read in place (the decoder slices it a block at a time), converted only if needed
+        else:  # as uint32, converted only where the file stores another integer type
             columns[name] = values if values.dtype == np.dtype("<u4") else values.astype(np.uint32)
     return columns
 
