@@ -371,6 +371,10 @@ pub(crate) fn decode_from(data: &[u8], start: usize, end: usize, limit: usize, p
 const BLOCK_LIMIT: usize = 4 << 20;
 /// How far to look for a block start; encoders end blocks far sooner (but for stored data).
 const SEARCH_BYTES: usize = 1 << 20;
+/// Work allowed while looking for one block start, in decoded bytes (about 0.1 s).
+const SEARCH_BUDGET: usize = 16 << 20;
+/// What building a candidate's Huffman tables counts for against that budget.
+const TABLE_COST: usize = 1 << 15;
 
 /// The first block start found in `from..to`: of a block with its own Huffman codes whose header
 /// is valid and whose body decodes, followed by a valid block header; or of the block after a
@@ -379,24 +383,33 @@ const SEARCH_BYTES: usize = 1 << 20;
 /// the zero bits before its byte boundary), so the block after it is taken.
 pub(crate) fn find_block(data: &[u8], from: usize, to: usize) -> Option<usize> {
     let to = to.min(8 * data.len()).min(from + 8 * SEARCH_BYTES);
-    (from..to).find_map(|start| {
+    // Crafted data could make many starts look valid for long: bound the work over all of them
+    // (a candidate past its header costs its tables and the bytes it decodes).
+    let mut budget = SEARCH_BUDGET;
+    for start in from..to {
         let mut bits = Bits::at(data, start);
         // cheap test first: not final, stored (000) or dynamic (100)
         let kind = bits.peek(3);
         if kind != 0b100 && kind != 0b000 {
-            return None;
+            continue;
         }
-        let mut decoded = Speculative { output: Vec::new(), clean_from: 0, limit: BLOCK_LIMIT };
-        let Some((false, block)) = read_header(&mut bits) else { return None };
-        decoded.block(&mut bits, &block)?;
-        let after = bits.pos();
-        let (_, next) = read_header(&mut bits)?;
-        if kind == 0b100 {
-            return Some(start);
+        let Some((false, block)) = read_header(&mut bits) else { continue };
+        let mut decoded = Speculative { output: Vec::new(), clean_from: 0, limit: BLOCK_LIMIT.min(budget) };
+        let found = decoded.block(&mut bits, &block).and_then(|()| {
+            let after = bits.pos();
+            let (_, next) = read_header(&mut bits)?;
+            if kind == 0b100 {
+                return Some(start);
+            }
+            decoded.block(&mut bits, &next)?;
+            Some(after)
+        });
+        if found.is_some() {
+            return found;
         }
-        decoded.block(&mut bits, &next)?;
-        Some(after)
-    })
+        budget = budget.checked_sub(TABLE_COST + decoded.output.len())?;
+    }
+    None
 }
 
 /// Bits written least significant first, as DEFLATE stores them.
