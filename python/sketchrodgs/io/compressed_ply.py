@@ -99,7 +99,7 @@ def _packed(vertex: plyfile.PlyElement, source: str) -> np.ndarray:
     if vertex.data.dtype == _PACKED_RECORD:
         return vertex.data.view(np.uint8).reshape(-1, 16)
     columns = _columns(vertex, PACKED, "u", source)
-    return np.stack([columns[name] for name in PACKED], axis=1).astype("<u4").view(np.uint8)
+    return np.stack([columns[name] for name in PACKED], axis=1).astype("<u4", copy=False).view(np.uint8)
 
 
 def _columns(element: plyfile.PlyElement, names: tuple[str, ...], kind: str, source: str) -> dict[str, np.ndarray]:

@@ -134,7 +134,7 @@ fn inflate_head(data: &[u8], end: usize, out: &mut [u8], window: &OnceLock<Vec<u
         // ignore failure: the cell is only ever set here
         let _ = window.set(out[tail..written].to_vec());
     }
-    Some((written, checksum(&out[..written])))
+    Some((written, crc_of(&out[..written])))
 }
 
 /// A later part, inflated on its own.
@@ -179,11 +179,12 @@ fn inflate_part(data: &[u8], start: usize, end: usize, last: bool, capacity: usi
     let mut rest = big_buffer(skip + capacity);
     let written = Decompressor::new().deflate_decompress(&input[..used], &mut rest).ok()?;
     rest.truncate(written);
-    let rest_checksum = checksum(rest.get(skip..)?);
+    let rest_checksum = crc_of(rest.get(skip..)?);
     Some(Part { speculative: partial.output, rest, skip, rest_checksum })
 }
 
-fn checksum(bytes: &[u8]) -> crc32fast::Hasher {
+/// CRC-32 state of `bytes`, to combine with those of the bytes around them.
+fn crc_of(bytes: &[u8]) -> crc32fast::Hasher {
     let mut hasher = crc32fast::Hasher::new();
     hasher.update(bytes);
     hasher
@@ -224,7 +225,7 @@ impl Part {
                 marker => out[window_start? + usize::from(marker - 256)],
             };
         }
-        checksum.combine(&self::checksum(&out[at..middle]));
+        checksum.combine(&crc_of(&out[at..middle]));
         checksum.combine(&self.rest_checksum);
         out[middle..end].copy_from_slice(rest);
         Some(end)

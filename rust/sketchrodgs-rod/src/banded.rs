@@ -160,14 +160,8 @@ impl BandedMatrix {
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
     use super::*;
+    use crate::test_rng::lcg;
 
-    /// Deterministic pseudo-random numbers in [-1, 1).
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
 
     #[test]
     fn solves_random_banded_spd_system_like_dense() {

@@ -62,6 +62,8 @@ mod error;
 mod frames;
 mod params;
 mod rod;
+#[cfg(test)]
+mod test_rng;
 mod world;
 
 pub use banded::{BandedMatrix, NotPositiveDefinite};

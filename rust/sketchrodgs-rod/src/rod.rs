@@ -1710,13 +1710,8 @@ fn finite_rotation(r: [[f64; 3]; 3]) -> Result<DMat3, RodError> {
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
     use super::*;
+    use crate::test_rng::lcg;
 
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
 
     /// A curved, twisted test rod with gravity, perturbed away from rest.
     fn test_rod(seed: &mut u64) -> ElasticRod {
