@@ -19,14 +19,19 @@ def print_table(title: str, headers: Sequence[str], rows: Sequence[Sequence[obje
 
 def best_time(fn: Callable[[], object], repeat: int = 5, warmup: int = 1) -> float:
     """Best wall time of `fn()` in seconds over `repeat` runs after `warmup` runs."""
+    return min(wall_times(fn, repeat, warmup))
+
+
+def wall_times(fn: Callable[[], object], repeat: int = 5, warmup: int = 1) -> list[float]:
+    """Wall times of `fn()` in seconds, `repeat` runs after `warmup` runs."""
     for _ in range(warmup):
         fn()
-    best = float("inf")
+    times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
         fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+        times.append(time.perf_counter() - t0)
+    return times
 
 
 def _fmt(v: object) -> str:

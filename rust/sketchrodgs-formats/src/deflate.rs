@@ -434,52 +434,60 @@ impl Speculative {
         result
     }
 
+    /// The body of a block with Huffman codes. `end` is kept up to date on every way out, so
+    /// that what a failed candidate decoded counts against the block search's budget.
     fn coded(&mut self, bits: &mut Bits<'_>, literals: &Huffman, distances: &Huffman) -> Option<()> {
         let mut room_end = self.room_end();
         let mut values = &mut self.values[..];
         let mut end = self.end;
-        let result = 'symbols: loop {
+        // The entry of the next code is looked up as soon as its bits are in the buffer, so
+        // that the lookup overlaps the work on the symbol before (as libdeflate does).
+        bits.refill();
+        let mut symbol = literals.lookup(bits.buffer);
+        let result = loop {
             if end > room_end {
                 self.end = end;
-                self.checkpoint()?;
+                if self.checkpoint().is_none() {
+                    break None;
+                }
                 room_end = self.room_end();
                 values = &mut self.values[..];
             }
-            // 56 bits: enough for three literals, or for a length code, its extra bits, a
-            // distance code and its extra bits
-            bits.refill();
-            let mut symbol = literals.decode(bits)?;
-            let mut literals_left = 2;
-            while symbol & LITERAL != 0 {
+            // the buffer holds at least 56 bits here: enough for a length code, its extra bits,
+            // a distance code and its extra bits
+            let length = symbol & 15;
+            if length == 0 {
+                break None;
+            }
+            bits.consume(length);
+            if symbol & LITERAL != 0 {
                 values[end] = (symbol >> 16) as u16;
                 end += 1;
-                if literals_left == 0 {
-                    continue 'symbols;
-                }
-                literals_left -= 1;
-                symbol = literals.decode(bits)?;
+                bits.refill();
+                symbol = literals.lookup(bits.buffer);
+                continue;
             }
             if symbol & END_OF_BLOCK != 0 {
                 break (!bits.overrun()).then_some(());
             }
-            if literals_left < 2 {
-                bits.refill();
-            }
             let extra = (symbol >> 8) & 15;
             let length = (symbol >> 16) as usize + (bits.buffer & ((1 << extra) - 1)) as usize;
             bits.consume(extra);
-            let code = distances.decode(bits)?;
+            let Some(code) = distances.decode(bits) else { break None };
             let extra = (code >> 8) & 15;
             let distance = (code >> 16) as usize + (bits.buffer & ((1 << extra) - 1)) as usize;
             bits.consume(extra);
+            bits.refill();
+            symbol = literals.lookup(bits.buffer);
             // the window holds WINDOW values, so a valid distance never reaches before it
-            let from = end.checked_sub(distance)?;
+            let Some(from) = end.checked_sub(distance) else { break None };
             copy(values, from, end, length);
             end += length;
         };
         self.end = end;
         result
     }
+
 
     /// The last WINDOW values hold no marker.
     fn clean(&self) -> bool {

@@ -130,7 +130,8 @@ fn gunzip_in_parts(raw: &[u8], out: &mut [u8], parts: usize, schedule: Schedule)
             (head(), later)
         }
     };
-    let (mut written, mut checksum) = head?;
+    let mut written = head?;
+    let mut checksum = crc_in_parallel(&out[..written]);
     for part in later? {
         written = part.join_into(out, written, &mut checksum)?;
     }
@@ -214,8 +215,8 @@ impl Handover {
 }
 
 /// The first part: the stream from its start up to the second part's start, straight into
-/// `out`; its length and checksum. Its last WINDOW bytes go to the handover when known.
-fn inflate_head(data: &[u8], out: &mut [u8], handover: &Handover) -> Option<(usize, crc32fast::Hasher)> {
+/// `out`; its length. Its last WINDOW bytes go to the handover when known.
+fn inflate_head(data: &[u8], out: &mut [u8], handover: &Handover) -> Option<usize> {
     let end = handover.first_start()?;
     let copied = (end / 8 + 1).min(data.len());
     let mut input = Vec::with_capacity(copied + 2);
@@ -230,7 +231,7 @@ fn inflate_head(data: &[u8], out: &mut [u8], handover: &Handover) -> Option<(usi
         // ignore failure: the cell is only ever set here
         let _ = handover.window.set(out[tail..written].to_vec());
     }
-    Some((written, crc_of(&out[..written])))
+    Some(written)
 }
 
 /// The head goes on from block start `from` to bit `to`, after the `written` bytes in `out`;
@@ -344,6 +345,18 @@ fn crc_of(bytes: &[u8]) -> crc32fast::Hasher {
     hasher
 }
 
+/// The same, a chunk per task.
+fn crc_in_parallel(bytes: &[u8]) -> crc32fast::Hasher {
+    let chunks: Vec<crc32fast::Hasher> = bytes.par_chunks(JOIN_CHUNK).map(crc_of).collect();
+    chunks.iter().fold(crc32fast::Hasher::new(), |mut whole, chunk| {
+        whole.combine(chunk);
+        whole
+    })
+}
+
+/// Bytes per task when joining parts.
+const JOIN_CHUNK: usize = 1 << 16;
+
 /// A non-final fixed-Huffman block whose output ends with `window`, padded in front with
 /// throw-away bytes so that its length in bits is `phase` modulo 8. Returns its bytes (the last
 /// one partly filled when `phase` is not 0), its length in bits and what it decodes to in bytes.
@@ -378,10 +391,9 @@ impl Part {
         let window = out.get(at.checked_sub(WINDOW)?..at)?;
         let mut meaning = Box::new([0u8; 1 << 16]);
         meaning.iter_mut().zip((0..=255u8).chain(window.iter().copied())).for_each(|(slot, byte)| *slot = byte);
-        const CHUNK: usize = 1 << 16;
         let checksums: Vec<crc32fast::Hasher> = out[at..middle]
-            .par_chunks_mut(CHUNK)
-            .zip(speculative.par_chunks(CHUNK))
+            .par_chunks_mut(JOIN_CHUNK)
+            .zip(speculative.par_chunks(JOIN_CHUNK))
             .map(|(bytes, values)| {
                 bytes.iter_mut().zip(values).for_each(|(byte, &value)| *byte = meaning[usize::from(value)]);
                 crc_of(bytes)
