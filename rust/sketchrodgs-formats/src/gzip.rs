@@ -545,6 +545,13 @@ mod tests {
                 }
                 assert!(out == data, "step {step}");
             }
+            // with more parts, the second one's share ends where the third one starts
+            for schedule in [Schedule::SecondPartFirst, Schedule::HeadFirst, Schedule::Parallel] {
+                let mut out = vec![0; data.len()];
+                let joined = gunzip_in_parts(&raw, &mut out, 3, schedule).unwrap_or_else(|| unreachable!("step {step}"));
+                assert_eq!(joined.written, data.len());
+                assert!(out == data, "step {step}, 3 parts");
+            }
         }
     }
 }
