@@ -11,7 +11,6 @@ import json
 
 import numpy as np
 import pytest
-from conftest import DATA
 from scipy.spatial import cKDTree
 
 from sketchrodgs import Camera, PathNotFoundError, SketchRodGSError, load_scene, synthetic

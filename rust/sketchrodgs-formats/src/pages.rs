@@ -4,12 +4,16 @@
 /// Ask the kernel to back the allocation of `buffer` (its whole capacity) with huge pages where
 /// it can. Advice only: contents and behaviour are unchanged.
 pub(crate) fn advise_huge_pages<T>(buffer: &Vec<T>) {
+    advise(buffer.as_ptr() as usize, buffer.capacity() * size_of::<T>());
+}
+
+/// The same for the `bytes` from address `start`, which must lie in one live allocation of ours.
+fn advise(start: usize, bytes: usize) {
     #[cfg(target_os = "linux")]
     {
         const HUGE: usize = 2 << 20;
-        let start = buffer.as_ptr() as usize;
         let begin = start.next_multiple_of(HUGE);
-        let end = (start + buffer.capacity() * size_of::<T>()) / HUGE * HUGE;
+        let end = (start + bytes) / HUGE * HUGE;
         if end > begin {
             // SAFETY: advice on whole pages inside a live allocation we own; it changes no
             // contents and no mapping.
@@ -17,7 +21,7 @@ pub(crate) fn advise_huge_pages<T>(buffer: &Vec<T>) {
         }
     }
     #[cfg(not(target_os = "linux"))]
-    let _ = buffer;
+    let _ = (start, bytes);
 }
 
 /// Zeroed bytes in pages of their own, fresh from the kernel: only the pages written are ever
@@ -49,11 +53,7 @@ impl FreshBytes {
         if map == libc::MAP_FAILED {
             return None;
         }
-        #[cfg(target_os = "linux")]
-        // SAFETY: advice on our own mapping; it changes no contents.
-        unsafe {
-            libc::madvise(map, len, libc::MADV_HUGEPAGE)
-        };
+        advise(map as usize, len);
         Some(FreshBytes { map: std::ptr::NonNull::new(map.cast())?, len })
     }
 

@@ -1,6 +1,6 @@
 //! Checks shared by the bindings: shapes and contiguity of incoming numpy arrays, named in errors.
 
-use numpy::PyReadonlyArray;
+use numpy::{PyReadonlyArray, PyReadwriteArray};
 use pyo3::prelude::*;
 
 use crate::errors::SketchRodGSError;
@@ -12,6 +12,16 @@ pub fn contiguous<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
 ) -> PyResult<&'a [T]> {
     array
         .as_slice()
+        .map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
+}
+
+/// A C-contiguous mutable view of `array`, or an error that names it.
+pub fn contiguous_mut<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    array: &'a mut PyReadwriteArray<'_, T, D>,
+    name: &str,
+) -> PyResult<&'a mut [T]> {
+    array
+        .as_slice_mut()
         .map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
 }
 

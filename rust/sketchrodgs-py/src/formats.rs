@@ -6,9 +6,13 @@ use numpy::{PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedA
 use pyo3::prelude::*;
 use sketchrodgs_formats::{SplatsMut, compressed_ply, gzip, splat, spz, summary};
 
-use crate::arrays::{as_rows, check_shape, contiguous};
+use crate::arrays::{as_rows, check_shape, contiguous, contiguous_mut};
 use crate::errors::SketchRodGSError;
 use crate::pool::run_parallel;
+
+fn formats_err(err: impl std::fmt::Display) -> PyErr {
+    SketchRodGSError::new_err(err.to_string())
+}
 
 /// Inflate the gzip member in `raw` (uint8) into `out` (uint8). Returns the number of bytes
 /// written, or None when the stream holds more than `out` does.
@@ -17,11 +21,11 @@ fn gunzip_into(py: Python<'_>, raw: &Bound<'_, PyArray1<u8>>, out: &Bound<'_, Py
     let raw = raw.try_readonly()?;
     let mut out = out.try_readwrite()?;
     let raw = contiguous(&raw, "raw")?;
-    let out = out.as_slice_mut().map_err(|_| SketchRodGSError::new_err("out: expected a C-contiguous array"))?;
+    let out = contiguous_mut(&mut out, "out")?;
     match run_parallel(py, "gunzip_into", || gzip::gunzip_into(raw, out))? {
         Ok(written) => Ok(Some(written)),
         Err(gzip::GunzipError::TooLong(_)) => Ok(None),
-        Err(error) => Err(SketchRodGSError::new_err(error.to_string())),
+        Err(error) => Err(formats_err(error)),
     }
 }
 
@@ -66,19 +70,13 @@ impl<'py> SplatArrays<'py> {
     }
 
     fn slices(&mut self) -> PyResult<SplatsMut<'_>> {
-        fn slice<'a, D: numpy::ndarray::Dimension>(
-            array: &'a mut numpy::PyReadwriteArray<'_, f32, D>,
-            name: &str,
-        ) -> PyResult<&'a mut [f32]> {
-            array.as_slice_mut().map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
-        }
         let sh_coefficients = self.sh.shape()[1];
         Ok(SplatsMut {
-            means: slice(&mut self.means, "means")?,
-            scales: slice(&mut self.scales, "scales")?,
-            quats: slice(&mut self.quats, "quats")?,
-            opacities: slice(&mut self.opacities, "opacities")?,
-            sh: slice(&mut self.sh, "sh")?,
+            means: contiguous_mut(&mut self.means, "means")?,
+            scales: contiguous_mut(&mut self.scales, "scales")?,
+            quats: contiguous_mut(&mut self.quats, "quats")?,
+            opacities: contiguous_mut(&mut self.opacities, "opacities")?,
+            sh: contiguous_mut(&mut self.sh, "sh")?,
             sh_coefficients,
         })
     }
@@ -100,9 +98,9 @@ fn decode_spz<'py>(
     let mut arrays = SplatArrays::new(&out)?;
     let rotations = if version == 2 { spz::Rotations::XyzBytes } else { spz::Rotations::SmallestThree };
     let attributes = spz::Attributes::split(payload, arrays.count(), rotations, sh_bytes_per_splat, fractional_bits)
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+        .map_err(formats_err)?;
     let out = arrays.slices()?;
-    run_parallel(py, "decode_spz", || spz::decode(&attributes, out))?.map_err(|e| SketchRodGSError::new_err(e.to_string()))
+    run_parallel(py, "decode_spz", || spz::decode(&attributes, out))?.map_err(formats_err)
 }
 
 /// Decode a compressed PLY: `bounds` (chunks, 12 or 18) float64, `packed` (N, 16) uint8 (four
@@ -124,7 +122,7 @@ fn decode_compressed_ply<'py>(
     let mut arrays = SplatArrays::new(&out)?;
     let out = arrays.slices()?;
     run_parallel(py, "decode_compressed_ply", || compressed_ply::decode(&packed, out))?
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))
+        .map_err(formats_err)
 }
 
 /// Decode `.splat` records (uint8, 32 bytes each) into the scene arrays `out` (SH of the DC
@@ -135,7 +133,7 @@ fn decode_splat<'py>(py: Python<'py>, records: &Bound<'py, PyArray1<u8>>, out: S
     let records = contiguous(&records, "records")?;
     let mut arrays = SplatArrays::new(&out)?;
     let out = arrays.slices()?;
-    run_parallel(py, "decode_splat", || splat::decode(records, out))?.map_err(|e| SketchRodGSError::new_err(e.to_string()))
+    run_parallel(py, "decode_splat", || splat::decode(records, out))?.map_err(formats_err)
 }
 
 type Summary = ([bool; 5], f32, (f32, f32), (f32, f32));

@@ -4,7 +4,7 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use sketchrodgs_skin::{Binding, skin_in_place};
 
-use crate::arrays::{as_rows, check_shape, contiguous};
+use crate::arrays::{as_rows, check_shape, contiguous, contiguous_mut};
 use crate::errors::SketchRodGSError;
 use crate::pool::run_parallel;
 
@@ -59,8 +59,8 @@ fn skin_scatter<'py>(
     };
     let deformed: &[[f32; 3]] = as_rows(contiguous(&deformed, "deformed")?);
     let vertex_rotation: &[[f32; 4]] = as_rows(contiguous(&vertex_rotation, "vertex_rotation")?);
-    let means_out = means.as_slice_mut().map_err(|_| SketchRodGSError::new_err("means: expected a C-contiguous array"))?;
-    let quats_out = quats.as_slice_mut().map_err(|_| SketchRodGSError::new_err("quats: expected a C-contiguous array"))?;
+    let means_out = contiguous_mut(&mut means, "means")?;
+    let quats_out = contiguous_mut(&mut quats, "quats")?;
     run_parallel(py, "skin", || -> Result<(), sketchrodgs_skin::SkinError> {
         let mut new_means = vec![[0.0_f32; 3]; g];
         let mut new_quats = vec![[0.0_f32; 4]; g];
