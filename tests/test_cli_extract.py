@@ -54,6 +54,20 @@ def test_extract_on_background_fails_with_one_line(tmp_path):
     assert not (tmp_path / "rod.json").exists()
 
 
+def test_a_failed_extract_still_writes_the_overlay(tmp_path):
+    """With --overlay a failure draws what the stroke met, so the user sees what to change."""
+    CAMERA.save(tmp_path / "cam.json")
+    (tmp_path / "stroke.json").write_text(json.dumps({"points": [[5, 5], [60, 8], [120, 5]]}))
+    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
+                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"),
+                     "--overlay", str(tmp_path / "fail.png"))
+    assert result.returncode == 1 and "fail.png" in result.stderr
+    assert not (tmp_path / "rod.json").exists()
+    overlay = np.asarray(Image.open(tmp_path / "fail.png").convert("RGB"))
+    green = (overlay[..., 1] > 200) & (overlay[..., 0] < 100)
+    assert green[:20, :130].sum() > 50  # the stroke is drawn where the user put it
+
+
 def test_extract_rejects_a_malformed_stroke_file(tmp_path):
     CAMERA.save(tmp_path / "cam.json")
     (tmp_path / "stroke.json").write_text(json.dumps({"points": [1, 2, 3]}))

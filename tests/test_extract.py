@@ -117,9 +117,36 @@ def test_binding_is_nearest_point_on_rest_polyline(case):
 
 
 def test_radius_is_estimated_when_omitted(case):
+    """The estimate is the visible half-width (alpha >= 0.5 across the stroke), which on splats
+    includes the surface Gaussians' footprint beyond their centres: measured here by hand from the
+    alpha image across the true axis, and between R and 1.8 R for these tubes."""
     name, tubes, stroke, _, _ = case
     ex = extract_rod(tubes.scene, CAMERA, stroke)
-    assert ex.radius == pytest.approx(tubes.radius, rel=0.2), name
+    assert ex.radius_estimated
+    assert tubes.radius <= ex.radius <= 1.8 * tubes.radius, (name, ex.radius)
+    assert ex.radius == pytest.approx(visible_half_width(tubes, stroke), rel=0.25), name
+
+
+def visible_half_width(tubes, stroke) -> float:
+    """Median over the middle of the stroke of half the alpha >= 0.5 run across the projected true
+    axis, in world units at the axis depth (an independent check of `estimate_radius`)."""
+    images = render(tubes.scene, CAMERA, outputs="index")
+    uv, depth = CAMERA.project(tubes.axes[0])
+    widths = []
+    for i in range(len(uv) // 4, 3 * len(uv) // 4, 10):
+        t = uv[min(i + 1, len(uv) - 1)] - uv[i - 1]
+        n = np.array([-t[1], t[0]]) / np.linalg.norm(t)
+        run = 0
+        for sign in (1, -1):
+            for k in range(1, 60):
+                c, r = (uv[i] + sign * k * n).astype(int)
+                if not (0 <= c < CAMERA.width and 0 <= r < CAMERA.height) or images.alpha[r, c] < 0.5:
+                    break
+                if abs(images.index_depth[r, c] - depth[i]) > 3 * tubes.radius:
+                    break
+                run += 1
+        widths.append(0.5 * (run + 1) * depth[i] / CAMERA.fx)
+    return float(np.median(widths))
 
 
 def test_knn_baseline_is_measured_on_the_same_input(case):
@@ -177,7 +204,7 @@ def straight_scene():
     [
         ([[10.0, 10.0]], SketchRodGSError, "at least 2 points"),
         ([[1.0, np.nan], [5.0, 5.0]], SketchRodGSError, "point 0 is not finite"),
-        ([[-50.0, -50.0], [-10.0, -20.0]], SketchRodGSError, "at least 2 points inside"),
+        ([[-50.0, -50.0], [-10.0, -20.0]], SketchRodGSError, "2 outside the image"),
         ([[10.0, 10.0], [100.0, 10.0]], PathNotFoundError, "background"),
         (np.zeros((3, 3)), SketchRodGSError, "expected shape"),
     ],
@@ -207,9 +234,22 @@ def test_stroke_ends_a_few_pixels_off_the_object_snap(straight_scene):
     assert ex.pieces_reached_goal == [True] and ex.coverage > 0.95
 
 
-def test_stroke_end_far_off_the_object_fails_clearly(straight_scene):
+def test_stroke_ends_overshooting_the_object_are_trimmed(straight_scene):
+    """Users overshoot: 40 px past each end of the tube, onto background, the rod still starts and
+    ends where the tube does."""
     tubes, images = straight_scene
-    stroke = stroke_along(tubes.axes[0])
-    stroke[-1, 1] += 240.0  # below the clutter, over empty background
-    with pytest.raises(PathNotFoundError, match="last point"):
-        extract_rod(tubes.scene, CAMERA, stroke, radius=0.01, render=images)
+    axis = tubes.axes[0]
+    uv, _ = CAMERA.project(axis)
+    tangent = (uv[-1] - uv[0]) / np.linalg.norm(uv[-1] - uv[0])
+    stroke = np.vstack([uv[0] - 40 * tangent, stroke_along(axis), uv[-1] + 40 * tangent])
+    ex = extract_rod(tubes.scene, CAMERA, stroke, radius=0.01, render=images)
+    assert ex.pieces_reached_goal == [True]
+    ends = np.sort([np.linalg.norm(ex.polyline[[0, -1]] - axis[k], axis=1).min() for k in (0, -1)])
+    assert ends.max() < 3 * tubes.radius, ends
+
+
+def test_a_failed_extraction_carries_what_it_found(straight_scene):
+    tubes, images = straight_scene
+    with pytest.raises(PathNotFoundError, match="background") as caught:
+        extract_rod(tubes.scene, CAMERA, np.array([[10.0, 10.0], [100.0, 10.0]]), radius=0.01, render=images)
+    assert caught.value.stroke.shape == (2, 2) and caught.value.pixel_path == []

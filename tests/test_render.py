@@ -316,11 +316,12 @@ def test_index_only_mode_gives_the_same_index_images():
     scene = random_scene(2000, 2, seed=3)
     cam = Camera.look_at((0.0, -1.0, -4.0), (0, 0, 0), width=120, height=90, fov_y_deg=45)
     full = render(scene, cam)
-    for outputs in ("index", ["index"], ("index", "index_depth"), {"index_depth"}):
+    for outputs in ("index", ["index"], ("index", "index_depth"), {"index_depth"}, ("index", "alpha")):
         fast = render(scene, cam, outputs=outputs)
-        assert fast.rgb is None and fast.alpha is None and fast.depth is None
+        assert fast.rgb is None and fast.depth is None
         np.testing.assert_array_equal(fast.index, full.index)
         np.testing.assert_array_equal(fast.index_depth, full.index_depth)
+        np.testing.assert_array_equal(fast.alpha, full.alpha)  # alpha is free: T is tracked anyway
     assert render(scene, cam, outputs=["rgb", "index"]).rgb is not None
     with pytest.raises(SketchRodGSError, match="outputs"):
         render(scene, cam, outputs=["colour"])
@@ -517,7 +518,7 @@ def test_cli_reads_a_3dgs_cameras_json(tmp_path):
     out = run_cli(str(PLANT), "--camera", str(cameras), "--view", "frame_0", "--index", str(npz))
     assert out.returncode == 0, out.stderr
     saved = np.load(npz)
-    assert "alpha" not in saved  # index only: no colour was computed
+    assert "depth" not in saved and "alpha" in saved  # index only: no colour; alpha comes free
     np.testing.assert_array_equal(saved["index"], render(plant_scene(), cam, outputs="index").index)
 
 

@@ -23,8 +23,9 @@ from .scene import GaussianScene
 
 DEFAULT_SMOOTHING_ITERATIONS = 10
 # Gaussians within this many radii of the axis belong to the object. Surface Gaussians sit at
-# about one radius from the axis, so exactly R would cut the tube's skin in half.
-DEFAULT_SEGMENT_SCALE = 1.5
+# about one radius from the axis, and on real captures their centres scatter well past the visible
+# half-width (the estimated R): at 1.5 R a pulled plant stem left a ghost of itself behind.
+DEFAULT_SEGMENT_SCALE = 2.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,6 +41,7 @@ class Extraction:
         gaussian_ids: (G,) int64 segmented Gaussians (within `segment_scale * R` of the polyline).
         binding: where each segmented Gaussian sits on the rest polyline.
         coverage: fraction of the stroke within 10 px of the path.
+        radius_estimated: whether `radius` was estimated from the image (not given).
         pieces_reached_goal: whether each piece reached the stroke's end (False: lost at a gap).
         camera: the camera the stroke was drawn in.
         stroke: (S, 2) float32 stroke in pixel coordinates.
@@ -57,6 +59,7 @@ class Extraction:
     pieces_reached_goal: list[bool]
     camera: Camera
     stroke: np.ndarray
+    radius_estimated: bool = False
     timings: dict[str, float] = field(default_factory=dict)
 
     def to_json(self, material: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -162,18 +165,23 @@ def extract_rod(
         scene: the scene.
         camera: the camera the stroke was drawn in.
         stroke: (S, 2) stroke points in continuous pixel coordinates of `camera`.
-        radius: R, the object's radius in world units. When None it is estimated: roughly from the
-            object's width on screen, then as the median distance of its Gaussians to the axis.
+        radius: R, the object's radius in world units. When None it is estimated from the object's
+            visible width across the stroke (`estimate_radius`).
         alpha: weight of the stroke-distance term of the path cost (paper Eq. 1).
         band_px: half-width of the band around the stroke (default 1 % of the image width).
         edge_length: polyline spacing (default from R and the object's length).
         smoothing_iterations: Laplacian smoothing steps before resampling (ends fixed).
         segment_scale: Gaussians within `segment_scale * R` of the axis are segmented.
         recentre: move the visible surface points onto the axis (our addition; the paper keeps them).
-        render: a render of `scene` by `camera` with `index` and `index_depth` (made if None).
+        render: a render of `scene` by `camera` with `index`, `index_depth` and `alpha` (made if
+            None; without alpha, widths are measured on the index image alone).
+
+    The stroke may overshoot the object at either end (it is trimmed to where it meets the object it
+    follows), pass over occluders (skipped by depth) and be drawn in either direction (the same rod).
 
     Raises:
-        PathNotFoundError: the stroke misses the object or the path is too short to make a rod.
+        PathNotFoundError: the stroke misses the object or the path is too short to make a rod. The
+            error carries `stroke`, `pixel_path` (what was found) and `lost_at` for drawing it.
         SketchRodGSError: bad arguments (the message names which).
     """
     timings: dict[str, float] = {}
@@ -194,28 +202,36 @@ def extract_rod(
         timings["render"] = time.perf_counter() - clock
     if render.index.shape != (camera.height, camera.width):
         raise SketchRodGSError(f"render: index image is {render.index.shape}, camera is {camera.height}x{camera.width}")
+    index = np.ascontiguousarray(render.index, np.int32)
+    depth = np.ascontiguousarray(render.index_depth, np.float32)
+    opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
+    focal = float(camera.fx)
+    # The search is run in one canonical direction, so a stroke and its reverse give the same rod.
+    flip = _canonical_flip(stroke)
+    work = np.ascontiguousarray(stroke[::-1] if flip else stroke)
 
     clock = time.perf_counter()
     estimated = radius is None
     if radius is None:
-        # the screen width over-estimates R (it includes the Gaussians' blur); it is refined below
-        radius = estimate_radius(render.index, render.index_depth, camera, stroke)
+        try:
+            radius = float(_core.estimate_radius(index, depth, opacity, work, focal, float(band_px or 0.0)))
+        except PathNotFoundError as err:
+            raise _failure(str(err), stroke, []) from None
         timings["estimate_radius"] = time.perf_counter() - clock
         clock = time.perf_counter()
 
-    trace = _core.trace_stroke(
-        np.ascontiguousarray(render.index, np.int32),
-        np.ascontiguousarray(render.index_depth, np.float32),
-        scene.means,
-        stroke,
-        float(radius),
-        float(alpha),
-        float(band_px or 0.0),
-    )
+    try:
+        trace = _core.trace_stroke(index, depth, scene.means, work, float(radius), float(alpha),
+                                   float(band_px or 0.0), focal_px=focal, alpha=opacity)
+    except PathNotFoundError as err:
+        raise _failure(str(err), stroke, []) from None
     timings["path_search"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     pieces = trace["pieces"]
+    pixel_path = [p["pixels"].astype(np.int64) for p in pieces]
+    if flip:
+        pixel_path = [p[::-1] for p in pixel_path[::-1]]
     path_ids = np.concatenate([p["gaussian_ids"].astype(np.int64) for p in pieces])
     _, first = np.unique(path_ids, return_index=True)
     path_ids = path_ids[np.sort(first)]  # one visit per Gaussian, in path order
@@ -223,40 +239,62 @@ def extract_rod(
     # zigzag before the chain is resampled by arc length.
     points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
     if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
-        raise PathNotFoundError(
-            f"the path under the stroke is too short for a rod ({len(path_ids)} Gaussians, "
-            f"{pl.polyline_length(points) if len(points) > 1 else 0.0:.3g} long, radius {radius:.3g})"
-        )
+        length = pl.polyline_length(points) if len(points) > 1 else 0.0
+        raise _failure(
+            f"the path under the stroke is too short for a rod ({len(path_ids)} Gaussians, {length:.3g} long, "
+            f"radius {radius:.3g}): draw the stroke along more of the object, or give a smaller --radius",
+            stroke, pixel_path, pieces)
     # Recentre on a uniform sampling at half the radius, then smooth and resample to the edge length.
     points = pl.resample(points, radius / 2)
     if recentre:
         nearby = scene.means[pl.near_box(points, scene.means, 2.5 * radius)]
         points = pl.recentre(points, nearby, radius)
-    if estimated:
-        radius = refine_radius(points, scene.means, radius)
     points = pl.laplacian_smooth(points, smoothing_iterations)
     length = pl.polyline_length(points)
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
     polyline = pl.resample(points, spacing)
+    if flip:
+        polyline, path_ids = polyline[::-1].copy(), path_ids[::-1].copy()
     timings["polyline"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     binding = pl.bind_nearest(polyline, scene.means, segment_scale * radius)
     timings["segment_bind"] = time.perf_counter() - clock
+    # every piece but the last ends at a gap, in either direction, so the flags need no reversal
+    reached = [bool(p["reached_goal"]) for p in pieces]
     return Extraction(
         polyline=polyline.astype(np.float32),
         radius=float(radius),
         edge_length=float(spacing),
-        pixel_path=[p["pixels"].astype(np.int64) for p in pieces],
+        pixel_path=pixel_path,
         path_gaussian_ids=path_ids,
         gaussian_ids=binding.gaussian_ids,
         binding=binding,
         coverage=float(trace["coverage"]),
-        pieces_reached_goal=[bool(p["reached_goal"]) for p in pieces],
+        pieces_reached_goal=reached,
         camera=camera,
         stroke=stroke,
+        radius_estimated=estimated,
         timings=timings,
     )
+
+
+def _canonical_flip(stroke: np.ndarray) -> bool:
+    """Whether to run the search on the reversed stroke: it always starts at the end that comes
+    first in (x, y) order, so the result does not depend on the direction the stroke was drawn."""
+    first, last = stroke[0], stroke[-1]
+    return bool((last[0], last[1]) < (first[0], first[1]))
+
+
+def _failure(message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list | None = None) -> PathNotFoundError:
+    """A PathNotFoundError that carries what was found, so that callers can draw it: `stroke`,
+    `pixel_path` (pieces of (P, 2) col, row) and `lost_at` ((col, row) where the path stopped)."""
+    error = PathNotFoundError(message)
+    error.stroke = stroke
+    error.pixel_path = pixel_path
+    lost = [p["lost_pixel"] for p in pieces or [] if p["lost_pixel"] is not None]
+    error.lost_at = lost
+    return error
 
 
 def _render_index(scene: GaussianScene, camera: Camera) -> RenderResult:
@@ -278,40 +316,13 @@ def _check_stroke(stroke: np.ndarray) -> np.ndarray:
     return points
 
 
-def estimate_radius(index: np.ndarray, depth: np.ndarray, camera: Camera, stroke: np.ndarray) -> float:
-    """Estimate R from the object's screen width across the stroke: half the width in pixels
-    times depth over focal length (median over the stroke's points on the object).
-
-    The width at a stroke point is the run of object pixels, perpendicular to the stroke, whose
-    depth stays within 5 % of the depth under the point.
-    """
-    height, width = index.shape
-    directions = np.gradient(stroke.astype(np.float64), axis=0)
-    norms = np.linalg.norm(directions, axis=1, keepdims=True)
-    normals = np.divide(directions[:, ::-1] * [1, -1], norms, out=np.zeros_like(directions), where=norms > 0)
-    cols, rows = np.floor(stroke[:, 0]).astype(int), np.floor(stroke[:, 1]).astype(int)
-    on_object = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height) & normals.any(axis=1)
-    on_object[on_object] = index[rows[on_object], cols[on_object]] >= 0
-    if not on_object.any():
-        raise PathNotFoundError("no stroke point lies on the object (the stroke is on background), so the radius cannot be estimated")
-    points, normals = stroke[on_object].astype(np.float64), normals[on_object]
-    z0 = depth[rows[on_object], cols[on_object]][:, None]
-    steps = np.arange(1, max(width, height) // 4)[None, :]
-    run = np.ones(len(points))
-    for sign in (1, -1):  # walk out to both sides of the stroke, across it
-        c = np.floor(points[:, :1] + sign * steps * normals[:, :1]).astype(int)
-        r = np.floor(points[:, 1:] + sign * steps * normals[:, 1:]).astype(int)
-        inside = (c >= 0) & (c < width) & (r >= 0) & (r < height)
-        c, r = np.where(inside, c, 0), np.where(inside, r, 0)
-        same = inside & (index[r, c] >= 0) & (np.abs(depth[r, c] - z0) <= 0.05 * z0)
-        run += np.where(same.all(axis=1), steps.shape[1], np.argmin(same, axis=1))
-    return float(np.median(0.5 * run * z0[:, 0] / camera.fx))
-
-
-def refine_radius(axis: np.ndarray, centres: np.ndarray, rough: float) -> float:
-    """R as the median distance to the axis of the Gaussians within 1.5 x `rough` of it: on a
-    tube's skin that distance is the radius (the paper's suggested spread estimate)."""
-    binding = pl.bind_nearest(axis, centres, 1.5 * rough)
-    if len(binding.distance) < 10:
-        return rough
-    return float(np.median(binding.distance))
+def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, band_px: float | None = None) -> float:
+    """R from the object's visible width under `stroke` (docs/extraction.md, "Radius"): half the
+    width of the surface across the stroke, where it stays solid (alpha >= 0.5) and its depth does
+    not jump, in world units at its depth; the median over the stroke's samples on the object."""
+    stroke = _check_stroke(stroke)
+    index = np.ascontiguousarray(render.index, np.int32)
+    opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
+    work = np.ascontiguousarray(stroke[::-1] if _canonical_flip(stroke) else stroke)
+    return float(_core.estimate_radius(index, np.ascontiguousarray(render.index_depth, np.float32), opacity, work,
+                                       float(camera.fx), float(band_px or 0.0)))

@@ -38,6 +38,7 @@ def draw_overlay(
     pixel_path: Sequence[np.ndarray] = (),
     polyline: np.ndarray | None = None,
     highlight: np.ndarray | None = None,
+    stops: Sequence[tuple[float, float]] = (),
 ) -> Image.Image:
     """The render with what extraction saw and found drawn on it.
 
@@ -48,6 +49,7 @@ def draw_overlay(
         pixel_path: pieces of the pixel path, (P, 2) (col, row) each (red).
         polyline: (M, 3) the 3D polyline, projected (blue, with its vertices).
         highlight: (G, 3) points to mark, e.g. the segmented Gaussians' centres (yellow dots).
+        stops: (col, row) pixels where the path lost the object (red crosses).
     """
     base = Image.fromarray(to_uint8(rgb) if rgb.dtype != np.uint8 else rgb, "RGB")
     # dim the render so the drawing stands out
@@ -60,6 +62,10 @@ def draw_overlay(
     draw.line([tuple(map(float, p)) for p in stroke], fill=STROKE_COLOUR, width=3, joint="curve")
     for piece in pixel_path:
         draw.point([(float(c) + 0.5, float(r) + 0.5) for c, r in piece], fill=PATH_COLOUR)
+    for c, r in stops:
+        x, y = float(c) + 0.5, float(r) + 0.5
+        draw.line((x - 6, y - 6, x + 6, y + 6), fill=PATH_COLOUR, width=2)
+        draw.line((x - 6, y + 6, x + 6, y - 6), fill=PATH_COLOUR, width=2)
     if polyline is not None and len(polyline) > 1:
         uv, depth = camera.project(polyline)
         visible = [tuple(map(float, p)) for p, z in zip(uv, depth) if z > 0]

@@ -23,7 +23,7 @@ from .errors import CameraError, SketchRodGSError
 from .scene import GaussianScene
 
 OUTPUT_NAMES = ("rgb", "alpha", "depth", "index", "index_depth")
-INDEX_OUTPUTS = frozenset({"index", "index_depth"})
+INDEX_OUTPUTS = frozenset({"index", "index_depth", "alpha"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,7 +33,7 @@ class RenderResult:
     Attributes:
         rgb: (H, W, 3) float32 colour including the background, not clamped (SH colours may
             exceed 1); None in index-only mode.
-        alpha: (H, W) float32 accumulated opacity 1 - T_final; None in index-only mode.
+        alpha: (H, W) float32 accumulated opacity 1 - T_final (also in index-only mode).
         depth: (H, W) float32 expected camera z, sum(w_i z_i) / alpha (0 where nothing
             contributes); None in index-only mode.
         index: (H, W) int32 row of the Gaussian with the largest alpha_i * T_i (ties go to the
@@ -68,7 +68,7 @@ def render(
         camera: a valid pinhole camera (its constructor has checked size, focal lengths and
             rigidity; the renderer checks again).
         background: RGB colour behind the scene, added as T_final * background.
-        outputs: "all"; "index" for only `index` and `index_depth` (cheaper: no SH, no colour);
+        outputs: "all"; "index" for only `index`, `index_depth` and `alpha` (cheaper: no SH, no colour);
             or an iterable of names from OUTPUT_NAMES. Outputs not computed are None.
 
     Returns:

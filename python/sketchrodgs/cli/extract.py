@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 
 from ..camera import load_cameras, select_camera
-from ..errors import SketchRodGSError
+from ..errors import PathNotFoundError, SketchRodGSError
 from ..extract import extract_rod
 from ..images import draw_overlay, save_png
 from ..io import load_scene
@@ -50,8 +50,16 @@ def run(args: argparse.Namespace) -> int:
     stroke = load_stroke(args.stroke)
     scene = load_scene(args.scene)
     images = render(scene, camera, outputs="all" if args.overlay else "index")
-    extraction = extract_rod(scene, camera, stroke, args.radius, alpha=args.alpha, edge_length=args.edge_length,
-                             render=images)
+    try:
+        extraction = extract_rod(scene, camera, stroke, args.radius, alpha=args.alpha, edge_length=args.edge_length,
+                                 render=images)
+    except PathNotFoundError as err:
+        if args.overlay:  # show what was found and where it stopped, so the user sees what to change
+            overlay = draw_overlay(images.rgb, camera, stroke, getattr(err, "pixel_path", []),
+                                   stops=getattr(err, "lost_at", []))
+            save_png(args.overlay, overlay)
+            raise PathNotFoundError(f"{err} (overlay of the stroke and the path so far: {args.overlay})") from None
+        raise
     extraction.save(args.output)
     if args.overlay:
         overlay = draw_overlay(images.rgb, camera, extraction.stroke, extraction.pixel_path, extraction.polyline,

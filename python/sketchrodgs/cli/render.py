@@ -60,9 +60,9 @@ def run(args: argparse.Namespace) -> int:
     if args.output:
         save_png(args.output, result.rgb)
     if args.index:
-        arrays = {"index": result.index, "index_depth": result.index_depth}
-        if result.alpha is not None:
-            arrays.update(alpha=result.alpha, depth=result.depth)
+        arrays = {"index": result.index, "index_depth": result.index_depth, "alpha": result.alpha}
+        if result.depth is not None:
+            arrays.update(depth=result.depth)
         buffer = io.BytesIO()
         np.savez_compressed(buffer, camera=np.array(json.dumps(camera.to_dict())), **arrays)
         with atomic_open(args.index) as stream:

@@ -1,5 +1,5 @@
 //! The band of pixels around the stroke, each labelled with its nearest depth-compatible stroke
-//! segment (DESIGN.md, path search step 2). Band pixels become the nodes of the search graph.
+//! segment (docs/extraction.md, "Search"). Band pixels become the nodes of the search graph.
 
 use crate::IndexImage;
 use crate::stroke::CleanStroke;
@@ -19,6 +19,8 @@ pub(crate) struct Band {
     pub t: Vec<f32>,
     /// Distance in pixels from the pixel centre to that segment.
     pub distance: Vec<f32>,
+    /// Arc length along the clean stroke at (segment, t), in pixels.
+    pub arc: Vec<f32>,
 }
 
 impl Band {
@@ -27,18 +29,14 @@ impl Band {
         (node != NO_NODE).then_some(node as usize)
     }
 
-    /// Progress along the stroke: segment index plus the parameter on it.
-    pub fn progress(&self, node: usize) -> f32 {
-        self.segment[node] as f32 + self.t[node]
-    }
-
     pub fn len(&self) -> usize {
         self.pixel.len()
     }
 }
 
-/// Label each object pixel within `band_px` of the stroke with its nearest segment among those whose
-/// depth is within `depth_gap` of the pixel's `Z`. Each segment scans only its own bounding box.
+/// Label each object pixel within `band_px` of the stroke with its nearest segment among those where
+/// the object's expected depth (the clean stroke's depth, interpolated) is within `depth_gap` of the
+/// pixel's `Z`. Each segment scans only its own bounding box.
 pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32, depth_gap: f32) -> Band {
     let mut band = Band {
         node_of_pixel: vec![NO_NODE; image.width * image.height],
@@ -46,10 +44,10 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
         segment: Vec::new(),
         t: Vec::new(),
         distance: Vec::new(),
+        arc: Vec::new(),
     };
     for i in 0..stroke.segment_count() {
         let (a, b) = (stroke.points[i], stroke.points[i + 1]);
-        let segment_depth = stroke.segment_depth(i);
         let ab = [b[0] - a[0], b[1] - a[1]];
         let length2 = ab[0] * ab[0] + ab[1] * ab[1];
         let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
@@ -61,13 +59,11 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
                 if image.index[p] < 0 {
                     continue;
                 }
-                if let Some(z) = segment_depth
-                    && (image.depth[p] - z).abs() > depth_gap
-                {
-                    continue;
-                }
                 let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
                 let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
+                if (image.depth[p] - stroke.depth_at(i, t)).abs() > depth_gap {
+                    continue;
+                }
                 let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
                 let d = (dx * dx + dy * dy).sqrt();
                 if d > band_px {
@@ -80,6 +76,7 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
                         band.segment.push(i as u32);
                         band.t.push(t);
                         band.distance.push(d);
+                        band.arc.push(stroke.arc[i] + t * (stroke.arc[i + 1] - stroke.arc[i]));
                     }
                     // strict: at a shared vertex the earlier segment keeps the pixel
                     node if d < band.distance[node as usize] => {
@@ -87,6 +84,7 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
                         band.segment[node] = i as u32;
                         band.t[node] = t;
                         band.distance[node] = d;
+                        band.arc[node] = stroke.arc[i] + t * (stroke.arc[i + 1] - stroke.arc[i]);
                     }
                     _ => {}
                 }

@@ -4,7 +4,7 @@
 //! image `Z`, the Gaussian centres and a user stroke, find the pixel path that follows the stroke
 //! while minimising the 3D length of the chain of Gaussians it crosses (paper Eq. 1). Depth gaps
 //! larger than `3R` are never crossed; where that cuts the path, the search resumes further along
-//! the stroke (occlusion handling). DESIGN.md, "Path search", is the specification.
+//! the stroke (occlusion handling). docs/extraction.md is the specification.
 //!
 //! ```
 //! use sketchrodgs_path::{IndexImage, TraceParams, trace_stroke};
@@ -20,9 +20,12 @@
 //! ```
 
 mod band;
+mod radius;
 mod search;
 mod stroke;
+mod width;
 
+pub use radius::estimate_radius;
 pub use search::{Piece, PieceEnd, Trace, trace_stroke};
 
 /// Things that make a trace impossible. Each names what was wrong.
@@ -34,12 +37,14 @@ pub enum PathError {
     IndexOutOfRange { id: i32, count: usize },
     #[error("stroke vertex {vertex} has a non-finite coordinate")]
     NonFiniteStroke { vertex: usize },
-    #[error("stroke needs at least 2 points inside the {width}x{height} image, got {inside}")]
-    StrokeTooShort { inside: usize, width: usize, height: usize },
-    #[error("stroke lies entirely on background (no Gaussian under any of its points)")]
+    #[error(
+        "stroke needs at least 2 distinct points inside the {width}x{height} image, got {inside} ({outside} outside the image)"
+    )]
+    StrokeTooShort { inside: usize, outside: usize, width: usize, height: usize },
+    #[error("stroke lies entirely on background (no Gaussian near any of its points): draw it over the object")]
     StrokeOnBackground,
-    #[error("the stroke's {which} point ({x:.1}, {y:.1}) is not on the object (nothing within {band_px:.1} px)")]
-    EndpointOffObject { which: &'static str, x: f32, y: f32, band_px: f32 },
+    #[error("the stroke meets an object at only {samples} of its samples: draw it along the object, end to end")]
+    StrokeBarelyOnObject { samples: usize },
     #[error("parameter {name} must be finite and > 0, got {value}")]
     BadParameter { name: &'static str, value: f64 },
 }
@@ -53,6 +58,8 @@ pub struct IndexImage<'a> {
     pub index: &'a [i32],
     /// Camera z of that Gaussian.
     pub depth: &'a [f32],
+    /// Accumulated opacity per pixel, if known: widths are measured where it is at least 0.5.
+    pub alpha: Option<&'a [f32]>,
 }
 
 impl<'a> IndexImage<'a> {
@@ -62,7 +69,21 @@ impl<'a> IndexImage<'a> {
         if width == 0 || height == 0 || pixels != Some(index.len()) || pixels != Some(depth.len()) {
             return Err(PathError::ImageSize { width, height, index: index.len(), depth: depth.len() });
         }
-        Ok(Self { width, height, index, depth })
+        Ok(Self { width, height, index, depth, alpha: None })
+    }
+
+    /// Add the accumulated opacity image (same size), used to measure the object's width.
+    pub fn with_alpha(self, alpha: &'a [f32]) -> Result<Self, PathError> {
+        if alpha.len() != self.index.len() {
+            return Err(PathError::ImageSize { width: self.width, height: self.height, index: self.index.len(), depth: alpha.len() });
+        }
+        Ok(Self { alpha: Some(alpha), ..self })
+    }
+
+    /// Whether pixel `p` shows the object solidly: a Gaussian, and opacity >= 0.5 where known.
+    #[inline]
+    pub(crate) fn covered(&self, p: usize) -> bool {
+        self.index[p] >= 0 && self.alpha.is_none_or(|a| a[p] >= 0.5)
     }
 
     /// Gaussian at pixel `p` (flat index), if any.
@@ -94,11 +115,15 @@ pub struct TraceParams {
     pub band_px: f32,
     /// A stroke vertex this close (pixels) to a path found so far counts as covered. Default 10.
     pub cover_px: f32,
+    /// The camera's focal length in pixels. It turns pixels into world distance at a depth, which
+    /// lets the stroke's depth change with its length (a receding part) and the path avoid
+    /// surfaces much wider than `2R` (a leaf or body beside the part). 0: unknown, neither is done.
+    pub focal_px: f32,
 }
 
 impl Default for TraceParams {
     fn default() -> Self {
-        Self { radius: 0.01, stroke_weight: 1.0, band_px: 0.0, cover_px: 10.0 }
+        Self { radius: 0.01, stroke_weight: 1.0, band_px: 0.0, cover_px: 10.0, focal_px: 0.0 }
     }
 }
 
@@ -114,6 +139,9 @@ impl TraceParams {
         };
         check("radius", f64::from(self.radius))?;
         check("cover_px", f64::from(self.cover_px))?;
+        if !(self.focal_px.is_finite() && self.focal_px >= 0.0) {
+            return Err(PathError::BadParameter { name: "focal_px", value: f64::from(self.focal_px) });
+        }
         if !(self.stroke_weight.is_finite() && self.stroke_weight >= 0.0) {
             return Err(PathError::BadParameter { name: "stroke_weight", value: self.stroke_weight });
         }
@@ -121,6 +149,25 @@ impl TraceParams {
         check("band_px", f64::from(band_px))?;
         Ok(Self { band_px, ..*self })
     }
+}
+
+/// Depth gaps under this many pixels' world size are never taken for an occlusion: the centres of
+/// a real capture's Gaussians scatter in depth by a few pixels, whatever the part's radius.
+const GAP_FLOOR_PX: f32 = 8.0;
+
+/// The depth gap that separates surfaces: `3R`, but at least `GAP_FLOOR_PX` pixels' world size at
+/// the median depth under the stroke (when the focal length is known).
+pub(crate) fn depth_gap(image: &IndexImage, stroke: &[[f32; 2]], radius: f32, focal_px: f32) -> f32 {
+    let mut under: Vec<f32> = stroke
+        .iter()
+        .filter_map(|p| image.pixel_at(p[0], p[1]))
+        .filter(|&q| image.index[q] >= 0)
+        .map(|q| image.depth[q])
+        .collect();
+    if focal_px <= 0.0 || under.is_empty() {
+        return 3.0 * radius;
+    }
+    (3.0 * radius).max(GAP_FLOOR_PX * width::median(&mut under) / focal_px)
 }
 
 #[cfg(test)]

@@ -1,11 +1,12 @@
 //! Dijkstra over the band with the paper's weight, and the resume-after-occlusion loop
-//! (DESIGN.md, path search steps 3-5).
+//! (docs/extraction.md, "Search").
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashSet};
 
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
+use crate::width::{excess_width, normals};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// How a piece of the path ended.
@@ -14,8 +15,8 @@ pub enum PieceEnd {
     /// It reached the stroke's last point.
     Goal,
     /// No forward step was possible without crossing a depth gap over `3R` or leaving the band;
-    /// `pixel` is where the connection was lost and `progress` how far along the stroke it was
-    /// (segment index + parameter on the cleaned stroke).
+    /// `pixel` is where the connection was lost and `progress` how far along the clean stroke it
+    /// was (pixels of its arc length).
     Lost { pixel: [u32; 2], progress: f32 },
 }
 
@@ -33,7 +34,8 @@ pub struct Piece {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Trace {
     pub pieces: Vec<Piece>,
-    /// The stroke after clean-up (vertices inside the image that did not jump onto an occluder).
+    /// The stroke samples (every few pixels, smoothed) on the depth chain the path follows: inside
+    /// the image, past overshooting ends, not over occluders.
     pub clean_stroke: Vec<[f32; 2]>,
     /// Fraction of the input stroke's length (inside the image) within `cover_px` of the path.
     pub coverage: f32,
@@ -52,21 +54,17 @@ pub fn trace_stroke(
     if let Some(&id) = image.index.iter().find(|&&k| k >= 0 && k as usize >= centres.len()) {
         return Err(PathError::IndexOutOfRange { id, count: centres.len() });
     }
-    let gap = 3.0 * params.radius;
-    let clean = clean_stroke(image, stroke, gap)?;
+    let gap = crate::depth_gap(image, stroke, params.radius, params.focal_px);
+    let clean = clean_stroke(image, stroke, params.band_px, gap, params.focal_px, Some(params.radius))?;
     let band = label_band(image, &clean, params.band_px, gap);
-    let endpoint = |which: &'static str, point: [f32; 2]| {
-        snap(image, &band, point, params.band_px).ok_or(PathError::EndpointOffObject {
-            which,
-            x: point[0],
-            y: point[1],
-            band_px: params.band_px,
-        })
-    };
-    let mut start = endpoint("first", clean.points[0])?;
-    let goal = endpoint("last", clean.points[clean.points.len() - 1])?;
+    // the clean stroke starts and ends on the object, so both ends have band pixels near them
+    let last = clean.points.len() - 1;
+    let endpoint =
+        |j: usize| snap(image, &band, clean.points[j], clean.arc[j], params.band_px).ok_or(PathError::StrokeBarelyOnObject { samples: 1 });
+    let mut start = endpoint(0)?;
+    let goal = endpoint(last)?;
 
-    let mut search = Search::new(image, centres, &band, &params);
+    let mut search = Search::new(image, centres, &band, &clean, &params, gap);
     let mut covered = CoverMask::new(image.width, image.height, params.cover_px);
     let mut pieces = Vec::new();
     loop {
@@ -76,7 +74,7 @@ pub fn trace_stroke(
         let end = if reached {
             PieceEnd::Goal
         } else {
-            PieceEnd::Lost { pixel: pixel_xy(image, band.pixel[end_node] as usize), progress: band.progress(end_node) }
+            PieceEnd::Lost { pixel: pixel_xy(image, band.pixel[end_node] as usize), progress: band.arc[end_node] }
         };
         pieces.push(Piece {
             gaussian_ids: distinct_ids(image, &pixels),
@@ -86,17 +84,19 @@ pub fn trace_stroke(
         if reached {
             break;
         }
-        match resume_point(image, &band, &clean, &covered, end_node, gap, params.band_px) {
+        match resume_point(image, &band, &clean, &covered, start, params.band_px) {
             Some(next) => start = next,
             None => break,
         }
     }
     let coverage = covered.coverage(image, stroke);
-    Ok(Trace { pieces, clean_stroke: clean.points, coverage })
+    let on_chain = clean.points.iter().zip(&clean.anchor).filter(|(_, a)| a.is_some()).map(|(p, _)| *p).collect();
+    Ok(Trace { pieces, clean_stroke: on_chain, coverage })
 }
 
-/// The node of the nearest band pixel within `radius` of `point`.
-fn snap(image: &IndexImage, band: &Band, point: [f32; 2], radius: f32) -> Option<usize> {
+/// The node of the nearest band pixel within `radius` of `point` that belongs to the stroke near
+/// arc length `arc` (where the stroke crosses itself, pixels nearby can belong to the other pass).
+fn snap(image: &IndexImage, band: &Band, point: [f32; 2], arc: f32, radius: f32) -> Option<usize> {
     let reach = radius.ceil() as i64 + 1;
     let (cx, cy) = (point[0].floor() as i64, point[1].floor() as i64);
     let mut best: Option<(f32, usize)> = None;
@@ -107,6 +107,7 @@ fn snap(image: &IndexImage, band: &Band, point: [f32; 2], radius: f32) -> Option
             let d = (dx * dx + dy * dy).sqrt();
             if let Some(node) = band.node(p)
                 && d <= radius.max(0.75)
+                && (band.arc[node] - arc).abs() <= 2.0 * radius + 2.0
                 && best.is_none_or(|(bd, _)| d < bd)
             {
                 best = Some((d, node));
@@ -116,26 +117,16 @@ fn snap(image: &IndexImage, band: &Band, point: [f32; 2], radius: f32) -> Option
     best.map(|(_, p)| p)
 }
 
-/// After a piece is lost at `lost`: the first uncovered stroke vertex past its progress whose
-/// depth is within `gap` of the depth where the connection was lost (paper, "Occlusion").
-fn resume_point(
-    image: &IndexImage,
-    band: &Band,
-    stroke: &CleanStroke,
-    covered: &CoverMask,
-    lost: usize,
-    gap: f32,
-    band_px: f32,
-) -> Option<usize> {
-    let progress = band.progress(lost);
-    let (lost_depth, lost_arc) = (image.depth[band.pixel[lost] as usize], stroke.arc_at(progress));
-    // carry the lost depth along the stroke by the object's depth trend, as clean-up does
-    let slope = stroke.slope_before(lost_arc);
+/// After a piece that started at node `start` is lost: the first sample on the stroke's depth chain
+/// past that start that no path covers yet (paper, "Occlusion"; the chain already skips samples
+/// over occluders). Counting from the start, not from the furthest pixel reached, matters where the
+/// stroke crosses itself: a pixel at the crossing can belong to the later pass.
+fn resume_point(image: &IndexImage, band: &Band, stroke: &CleanStroke, covered: &CoverMask, start: usize, band_px: f32) -> Option<usize> {
+    let arc = band.arc[start];
     (0..stroke.points.len())
-        .filter(|&j| j as f32 > progress)
+        .filter(|&j| stroke.arc[j] > arc && stroke.anchor[j].is_some())
         .filter(|&j| !covered.contains(stroke.points[j]))
-        .filter(|&j| stroke.depth[j].is_some_and(|z| (z - lost_depth - slope * (stroke.arc[j] - lost_arc)).abs() <= gap))
-        .find_map(|j| snap(image, band, stroke.points[j], band_px))
+        .find_map(|j| snap(image, band, stroke.points[j], stroke.arc[j], band_px))
 }
 
 fn pixel_xy(image: &IndexImage, p: usize) -> [u32; 2] {
@@ -163,6 +154,12 @@ impl Ord for Cost {
 }
 
 const NONE: u32 = u32::MAX;
+/// The path may step back along the stroke by this many pixels of arc.
+const BACK_SLACK_PX: f32 = 4.0;
+/// Extra cost per pixel step, in units of a pixel's world size, for each radius by which the
+/// surface under a pixel is wider than the part (`width::excess_width`): it keeps the path off
+/// leaves and bodies that touch the part at its depth, where big Gaussians make steps free.
+const WIDE_WEIGHT: f64 = 2.0;
 const NEIGHBOURS: [(i64, i64); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
 
 /// Dijkstra state over the band's nodes, reused across the pieces of one trace.
@@ -172,20 +169,32 @@ struct Search<'a> {
     params: &'a TraceParams,
     /// Centre of the Gaussian under each node, in f64 for the cost sums.
     centre: Vec<[f64; 3]>,
+    /// Extra cost per pixel step onto each node for a surface much wider than the part.
+    wide: Vec<f64>,
+    /// No step between pixels whose depths differ by more (`crate::depth_gap`).
+    gap: f32,
     cost: Vec<f64>,
     previous: Vec<u32>,
     touched: Vec<usize>,
 }
 
 impl<'a> Search<'a> {
-    fn new(image: &'a IndexImage<'a>, centres: &[[f32; 3]], band: &'a Band, params: &'a TraceParams) -> Self {
+    fn new(
+        image: &'a IndexImage<'a>,
+        centres: &[[f32; 3]],
+        band: &'a Band,
+        stroke: &CleanStroke,
+        params: &'a TraceParams,
+        gap: f32,
+    ) -> Self {
         let centre = band
             .pixel
             .iter()
             .map(|&p| centres[image.index[p as usize] as usize].map(f64::from))
             .collect();
         let n = band.len();
-        Self { image, band, params, centre, cost: vec![f64::INFINITY; n], previous: vec![NONE; n], touched: Vec::new() }
+        let wide = wide_penalty(image, band, stroke, params);
+        Self { image, band, params, centre, wide, gap, cost: vec![f64::INFINITY; n], previous: vec![NONE; n], touched: Vec::new() }
     }
 
     /// Shortest paths from node `start`. Returns the goal if reached, else the settled node of
@@ -198,13 +207,13 @@ impl<'a> Search<'a> {
         }
         self.touched.clear();
         let (width, height) = (self.image.width as i64, self.image.height as i64);
-        let max_jump2 = (3.0 * f64::from(self.params.radius)).powi(2);
+        let max_gap = self.gap;
         let half_width = self.image.width as f64 / 2.0;
         let mut heap = BinaryHeap::new();
         self.cost[start] = 0.0;
         self.touched.push(start);
         heap.push(Reverse((Cost(0.0), start)));
-        let mut furthest = (start, self.band.progress(start));
+        let mut furthest = (start, self.band.arc[start]);
         while let Some(Reverse((Cost(cost), a))) = heap.pop() {
             if cost > self.cost[a] {
                 continue; // stale entry
@@ -212,30 +221,35 @@ impl<'a> Search<'a> {
             if a == goal {
                 return (goal, true);
             }
-            let progress = self.band.progress(a);
+            let progress = self.band.arc[a];
             if progress > furthest.1 {
                 furthest = (a, progress);
             }
             let pixel = self.band.pixel[a] as usize;
             let (col, row) = ((pixel % self.image.width) as i64, (pixel / self.image.width) as i64);
-            let (ca, segment_a) = (self.centre[a], self.band.segment[a]);
+            let (ca, arc_a) = (self.centre[a], self.band.arc[a]);
             for (dx, dy) in NEIGHBOURS {
                 let (x, y) = (col + dx, row + dy);
                 if x < 0 || y < 0 || x >= width || y >= height {
                     continue;
                 }
                 let Some(b) = self.band.node((y * width + x) as usize) else { continue };
-                // forward only along the stroke, which keeps the path on its branch at crossings
-                if self.band.segment[b] < segment_a {
+                // forward along the stroke (a little slack for its wiggles), which keeps the path on
+                // its branch at crossings
+                if self.band.arc[b] < arc_a - BACK_SLACK_PX {
                     continue;
                 }
                 let cb = self.centre[b];
                 let length2 = (ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2);
-                if length2 > max_jump2 {
-                    continue; // a depth gap: never jump onto another surface
+                // a depth gap: never step onto another surface. Depth, not centre distance: on real
+                // captures neighbouring pixels' Gaussians can be big and far apart sideways.
+                let (za, zb) = (self.image.depth[pixel], self.image.depth[self.band.pixel[b] as usize]);
+                if (za - zb).abs() > max_gap {
+                    continue;
                 }
                 let deviation = f64::from(self.band.distance[b]) / half_width;
-                let next = cost + length2.sqrt() + self.params.stroke_weight * deviation * deviation;
+                let step = if dx != 0 && dy != 0 { std::f64::consts::SQRT_2 } else { 1.0 };
+                let next = cost + length2.sqrt() + self.wide[b] * step + self.params.stroke_weight * deviation * deviation;
                 if next < self.cost[b] {
                     if self.cost[b].is_infinite() {
                         self.touched.push(b);
@@ -260,6 +274,23 @@ impl<'a> Search<'a> {
         path.reverse();
         path
     }
+}
+
+/// Per node: `WIDE_WEIGHT` times the excess width (in radii, capped) times a pixel's world size;
+/// all zero when the focal length is unknown.
+fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &TraceParams) -> Vec<f64> {
+    let focal = params.focal_px;
+    if focal <= 0.0 {
+        return vec![0.0; band.len()];
+    }
+    let normal = normals(&stroke.points);
+    (0..band.len())
+        .map(|node| {
+            let p = band.pixel[node] as usize;
+            let excess = excess_width(image, p, normal[band.segment[node] as usize], focal, params.radius);
+            WIDE_WEIGHT * f64::from(excess) * f64::from(image.depth[p] / focal)
+        })
+        .collect()
 }
 
 /// Pixels within `cover_px` of any path pixel found so far.

@@ -1,14 +1,39 @@
-//! Stroke clean-up (DESIGN.md, path search step 1).
+//! Stroke clean-up (docs/extraction.md, "Stroke clean-up"): the stroke is clipped to the image,
+//! resampled densely and smoothed, and the depth it follows is chosen globally: the chain of
+//! stroke samples whose depths agree, where the allowed depth change grows with the distance
+//! along the stroke. No single sample decides, the stroke's direction does not matter, and ends
+//! that overshoot the object (onto background or a neighbour) are trimmed instead of refused.
 
+use crate::width::{excess_width, normals};
 use crate::{IndexImage, PathError};
 
-/// The stroke after clean-up: vertices inside the image, minus those that jumped onto an occluder.
+/// Spacing of the resampled stroke, in pixels.
+const SAMPLE_PX: f32 = 3.0;
+/// Standard deviation of the Gaussian smoothing along the stroke, in pixels of arc. It takes out
+/// hand jitter between the points a user drew; curves of the object are far wider than this.
+const SMOOTH_SIGMA_PX: f32 = 6.0;
+/// At most this many depth candidates per sample (the nearest surfaces to it).
+const MAX_CANDIDATES: usize = 4;
+/// Depth may change by this much per unit of lateral distance along the stroke between two chain
+/// samples, on top of `3R`. It matters where the chain skips samples (over an occluder): between
+/// neighbouring samples `3R` alone already follows a steeply receding part.
+const DEPTH_SLOPE: f32 = 1.0;
+/// Score taken off a surface for each radius by which it is wider across the stroke than
+/// `WIDE_FROM` radii (capped at `WIDE_CAP`): the chain prefers the slender part to a leaf or body
+/// beside it at a similar depth.
+const WIDE_SCORE: f32 = 0.15;
+
+/// The stroke after clean-up.
 #[derive(Debug, Clone)]
 pub(crate) struct CleanStroke {
+    /// Samples from where the stroke first meets the object it follows to where it leaves it.
     pub points: Vec<[f32; 2]>,
-    /// `Z` under each vertex; `None` over background (such vertices anchor no depth).
-    pub depth: Vec<Option<f32>>,
-    /// Screen arc length from the first vertex to each vertex, in pixels.
+    /// The depth the object has at each sample: the chosen surface's depth at chain samples,
+    /// interpolated along the stroke in between (over an occluder or a gap).
+    pub depth: Vec<f32>,
+    /// At chain samples, the pixel of the chosen surface nearest the sample (`None` elsewhere).
+    pub anchor: Vec<Option<usize>>,
+    /// Screen arc length from the first sample, in pixels.
     pub arc: Vec<f32>,
 }
 
@@ -17,105 +42,226 @@ impl CleanStroke {
         self.points.len().saturating_sub(1)
     }
 
-    /// Depth of segment `i`: the smaller `Z` of its two ends (`None` if both are over background).
-    pub fn segment_depth(&self, i: usize) -> Option<f32> {
-        match (self.depth[i], self.depth[i + 1]) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
-    }
-
-    /// Screen arc length at `progress` (segment index + parameter).
-    pub fn arc_at(&self, progress: f32) -> f32 {
-        let i = (progress.floor().max(0.0) as usize).min(self.segment_count().saturating_sub(1));
-        let t = (progress - i as f32).clamp(0.0, 1.0);
-        self.arc[i] + t * (self.arc[i + 1] - self.arc[i])
-    }
-
-    /// How fast the object's depth changes per pixel of stroke just before `arc`, from the
-    /// vertices with depth (see [`depth_slope`]).
-    pub fn slope_before(&self, arc: f32) -> f32 {
-        let history: Vec<(f32, f32)> =
-            (0..self.points.len()).filter(|&j| self.arc[j] <= arc).filter_map(|j| self.depth[j].map(|z| (self.arc[j], z))).collect();
-        depth_slope(&history)
+    /// The object's expected depth at parameter `t` of segment `i`.
+    pub fn depth_at(&self, i: usize, t: f32) -> f32 {
+        self.depth[i] + t * (self.depth[i + 1] - self.depth[i])
     }
 }
 
-/// Stroke vertices this far back (pixels of stroke) inform the depth trend.
-const TREND_WINDOW_PX: f32 = 120.0;
-/// A trend needs at least this much stroke behind it; shorter ones are noise.
-const TREND_MIN_SPAN_PX: f32 = 30.0;
-
-/// Least-squares slope dZ/ds of the last `TREND_WINDOW_PX` of `(arc, depth)` history; 0 when the
-/// history is too short to tell a trend from the surface's own depth noise.
-pub(crate) fn depth_slope(history: &[(f32, f32)]) -> f32 {
-    let Some(&(last, _)) = history.last() else { return 0.0 };
-    let recent: Vec<(f64, f64)> = history
-        .iter()
-        .filter(|(s, _)| last - s <= TREND_WINDOW_PX)
-        .map(|&(s, z)| (f64::from(s), f64::from(z)))
-        .collect();
-    let span = recent.first().map_or(0.0, |f| last - f.0 as f32);
-    if recent.len() < 3 || span < TREND_MIN_SPAN_PX {
-        return 0.0;
-    }
-    let n = recent.len() as f64;
-    let (ms, mz) = (recent.iter().map(|r| r.0).sum::<f64>() / n, recent.iter().map(|r| r.1).sum::<f64>() / n);
-    let sxx: f64 = recent.iter().map(|r| (r.0 - ms).powi(2)).sum();
-    let sxz: f64 = recent.iter().map(|r| (r.0 - ms) * (r.1 - mz)).sum();
-    if sxx > 0.0 { (sxz / sxx) as f32 } else { 0.0 }
+/// A surface near a stroke sample: the depth of its pixel nearest the sample and how well it fits.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    depth: f32,
+    score: f32,
+    pixel: usize,
 }
 
-/// Keep the stroke vertices inside the image; drop a vertex whose `Z` differs by more than
-/// `depth_gap` from the depth the object is expected to have there: the last kept vertex's depth,
-/// carried along the stroke by the recent depth trend (so a receding object is not mistaken for
-/// an occluder after a gap).
-pub(crate) fn clean_stroke(image: &IndexImage, stroke: &[[f32; 2]], depth_gap: f32) -> Result<CleanStroke, PathError> {
+/// Clip, resample, smooth, and choose the depth chain. `reach_px` is how far from a sample a
+/// surface may be (the band half-width); `depth_gap` is `3R`; `focal_px` turns pixels of stroke
+/// into lateral distance (0: unknown, then the allowed change stays `3R`); `slender_radius` `R`, if
+/// given, lowers the score of surfaces much wider than `2R` (needs `focal_px`).
+pub(crate) fn clean_stroke(
+    image: &IndexImage,
+    stroke: &[[f32; 2]],
+    reach_px: f32,
+    depth_gap: f32,
+    focal_px: f32,
+    slender_radius: Option<f32>,
+) -> Result<CleanStroke, PathError> {
     if let Some(vertex) = stroke.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
         return Err(PathError::NonFiniteStroke { vertex });
     }
-    let mut points: Vec<[f32; 2]> = Vec::with_capacity(stroke.len());
-    let mut depth = Vec::with_capacity(stroke.len());
-    let mut arc = Vec::with_capacity(stroke.len());
-    let mut history: Vec<(f32, f32)> = Vec::new(); // (arc, depth) of kept vertices with depth
-    for p in stroke {
-        let Some(pixel) = image.pixel_at(p[0], p[1]) else { continue };
-        let s = match points.last() {
-            Some(q) if q == p => continue, // a repeated point adds a zero-length segment and nothing else
-            Some(q) => arc.last().copied().unwrap_or(0.0) + (p[0] - q[0]).hypot(p[1] - q[1]),
-            None => 0.0,
-        };
-        let z = image.gaussian(pixel).map(|_| image.depth[pixel]);
-        if let (Some(z), Some(&(s_last, z_last))) = (z, history.last()) {
-            let expected = z_last + depth_slope(&history) * (s - s_last);
-            if (z - expected).abs() > depth_gap {
-                continue;
-            }
-        }
-        if let Some(z) = z {
-            history.push((s, z));
-        }
-        points.push(*p);
-        depth.push(z);
-        arc.push(s);
+    // resample first, so that a segment reaching in from outside the image keeps its inside part
+    let dense = resample(stroke);
+    let inside: Vec<[f32; 2]> = dense.into_iter().filter(|p| image.pixel_at(p[0], p[1]).is_some()).collect();
+    let outside = stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count();
+    let too_short = |inside| PathError::StrokeTooShort { inside, outside, width: image.width, height: image.height };
+    if inside.len() < 2 {
+        return Err(too_short(stroke.len() - outside));
     }
+    let (points, arc) = smooth(&inside);
     if points.len() < 2 {
-        return Err(PathError::StrokeTooShort { inside: points.len(), width: image.width, height: image.height });
+        return Err(too_short(1));
     }
-    if depth.iter().all(Option::is_none) && !crosses_object(image, &points) {
-        return Err(PathError::StrokeOnBackground);
+    let normal = normals(&points);
+    let candidates: Vec<Vec<Candidate>> = points
+        .iter()
+        .zip(&normal)
+        .map(|(&p, &n)| surfaces_near(image, p, n, reach_px, depth_gap / 3.0, slender_radius.filter(|_| focal_px > 0.0).map(|r| (r, focal_px))))
+        .collect();
+    let chain = depth_chain(&candidates, &arc, depth_gap, focal_px);
+    if chain.len() < 2 {
+        let on_object = candidates.iter().filter(|c| !c.is_empty()).count();
+        return Err(if on_object == 0 { PathError::StrokeOnBackground } else { PathError::StrokeBarelyOnObject { samples: on_object } });
     }
-    Ok(CleanStroke { points, depth, arc })
+    // trim to the chain's first and last samples; interpolate the depth between chain samples
+    let (first, last) = (chain[0].0, chain[chain.len() - 1].0);
+    let mut depth = vec![0.0; last - first + 1];
+    let mut anchor = vec![None; last - first + 1];
+    for pair in chain.windows(2) {
+        let ((i, zi, _), (j, zj, _)) = (pair[0], pair[1]);
+        for k in i..=j {
+            let t = if arc[j] > arc[i] { (arc[k] - arc[i]) / (arc[j] - arc[i]) } else { 0.0 };
+            depth[k - first] = zi + t * (zj - zi);
+        }
+    }
+    for &(i, _, pixel) in &chain {
+        anchor[i - first] = Some(pixel);
+    }
+    let arc = arc[first..=last].iter().map(|s| s - arc[first]).collect();
+    Ok(CleanStroke { points: points[first..=last].to_vec(), depth, anchor, arc })
 }
 
-/// Whether any point along the stroke (sampled every half pixel) lies over a Gaussian.
-fn crosses_object(image: &IndexImage, points: &[[f32; 2]]) -> bool {
-    points.windows(2).any(|w| {
+/// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed.
+fn resample(stroke: &[[f32; 2]]) -> Vec<[f32; 2]> {
+    let Some(&first) = stroke.first() else { return Vec::new() };
+    let mut out = vec![first];
+    for w in stroke.windows(2) {
         let (a, b) = (w[0], w[1]);
-        let steps = ((b[0] - a[0]).hypot(b[1] - a[1]) * 2.0).ceil().max(1.0) as usize;
-        (0..=steps).any(|s| {
+        let length = (b[0] - a[0]).hypot(b[1] - a[1]);
+        if length == 0.0 {
+            continue;
+        }
+        let steps = (length / SAMPLE_PX).ceil().max(1.0) as usize;
+        out.extend((1..=steps).map(|s| {
             let t = s as f32 / steps as f32;
-            image.pixel_at(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])).is_some_and(|p| image.index[p] >= 0)
+            [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+        }));
+    }
+    out
+}
+
+/// Gaussian smoothing along arc length with a window that shrinks symmetrically at the ends, so the
+/// ends stay where the user put them. Returns the points and their arc lengths.
+fn smooth(points: &[[f32; 2]]) -> (Vec<[f32; 2]>, Vec<f32>) {
+    let arc = arc_lengths(points);
+    let total = arc[arc.len() - 1];
+    let smoothed: Vec<[f32; 2]> = (0..points.len())
+        .map(|i| {
+            let half = (3.0 * SMOOTH_SIGMA_PX).min(arc[i]).min(total - arc[i]);
+            let (mut sum, mut weight) = ([0.0_f32; 2], 0.0_f32);
+            let (mut j, mut k) = (i, i);
+            while j > 0 && arc[i] - arc[j - 1] <= half {
+                j -= 1;
+            }
+            while k + 1 < points.len() && arc[k + 1] - arc[i] <= half {
+                k += 1;
+            }
+            for (q, s) in points[j..=k].iter().zip(&arc[j..=k]) {
+                let w = (-0.5 * ((s - arc[i]) / SMOOTH_SIGMA_PX).powi(2)).exp();
+                sum = [sum[0] + w * q[0], sum[1] + w * q[1]];
+                weight += w;
+            }
+            [sum[0] / weight, sum[1] / weight]
         })
-    })
+        .collect();
+    let mut out: Vec<[f32; 2]> = Vec::with_capacity(smoothed.len());
+    for p in smoothed {
+        if out.last().is_none_or(|q| (p[0] - q[0]).hypot(p[1] - q[1]) > 1e-3) {
+            out.push(p);
+        }
+    }
+    let arc = arc_lengths(&out);
+    (out, arc)
+}
+
+fn arc_lengths(points: &[[f32; 2]]) -> Vec<f32> {
+    let mut arc = Vec::with_capacity(points.len());
+    let mut s = 0.0;
+    for (i, p) in points.iter().enumerate() {
+        if i > 0 {
+            s += (p[0] - points[i - 1][0]).hypot(p[1] - points[i - 1][1]);
+        }
+        arc.push(s);
+    }
+    arc
+}
+
+/// The surfaces within `reach_px` of `point`: its object pixels grouped by depth (a gap over
+/// `split` starts a new surface), each represented by its pixel nearest the point. A surface
+/// scores higher the nearer it is and, given `slender` = (R, focal length), the less it is wider
+/// across the stroke (direction `normal`) than the part.
+fn surfaces_near(
+    image: &IndexImage,
+    point: [f32; 2],
+    normal: [f32; 2],
+    reach_px: f32,
+    split: f32,
+    slender: Option<(f32, f32)>,
+) -> Vec<Candidate> {
+    let reach = reach_px.ceil() as i64;
+    let (cx, cy) = (point[0].floor() as i64, point[1].floor() as i64);
+    let mut pixels: Vec<(f32, f32, usize)> = Vec::new(); // (depth, distance, pixel)
+    for row in (cy - reach).max(0)..=(cy + reach).min(image.height as i64 - 1) {
+        for col in (cx - reach).max(0)..=(cx + reach).min(image.width as i64 - 1) {
+            let p = row as usize * image.width + col as usize;
+            if image.index[p] < 0 {
+                continue;
+            }
+            let d = (col as f32 + 0.5 - point[0]).hypot(row as f32 + 0.5 - point[1]);
+            if d <= reach_px.max(0.75) {
+                pixels.push((image.depth[p], d, p));
+            }
+        }
+    }
+    pixels.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // (depth of the nearest pixel, its distance, pixel count, that pixel)
+    let mut surfaces: Vec<(f32, f32, usize, usize)> = Vec::new();
+    for (i, &(z, d, p)) in pixels.iter().enumerate() {
+        match surfaces.last_mut() {
+            Some(s) if z - pixels[i - 1].0 <= split => {
+                s.2 += 1;
+                if d < s.1 {
+                    (s.0, s.1, s.3) = (z, d, p);
+                }
+            }
+            _ => surfaces.push((z, d, 1, p)),
+        }
+    }
+    // a lone pixel is a stray Gaussian unless it is right under the point
+    surfaces.retain(|s| s.2 >= 2 || s.1 <= 1.0);
+    surfaces.sort_by(|a, b| a.1.total_cmp(&b.1));
+    surfaces.truncate(MAX_CANDIDATES);
+    surfaces
+        .iter()
+        .map(|s| {
+            let near = 1.0 - 0.5 * (s.1 / reach_px.max(1.0)).min(1.0);
+            let wide = slender.map_or(0.0, |(radius, focal)| excess_width(image, s.3, normal, focal, radius));
+            Candidate { depth: s.0, score: near - WIDE_SCORE * wide, pixel: s.3 }
+        })
+        .collect()
+}
+
+/// The chain of (sample, depth, pixel) with the largest total score whose consecutive members agree in
+/// depth: `|dz| <= depth_gap + DEPTH_SLOPE * lateral`, lateral being the stroke length between them
+/// at that depth. Exact dynamic programming over all pairs (the stroke has a few hundred samples).
+fn depth_chain(candidates: &[Vec<Candidate>], arc: &[f32], depth_gap: f32, focal_px: f32) -> Vec<(usize, f32, usize)> {
+    let nodes: Vec<(usize, Candidate)> =
+        candidates.iter().enumerate().flat_map(|(i, c)| c.iter().map(move |&c| (i, c))).collect();
+    let mut best = vec![0.0_f32; nodes.len()];
+    let mut previous = vec![usize::MAX; nodes.len()];
+    let mut start_of_sample = 0; // first node of the current sample: only earlier samples link
+    for b in 0..nodes.len() {
+        if b > 0 && nodes[b].0 != nodes[b - 1].0 {
+            start_of_sample = b;
+        }
+        let (j, cb) = nodes[b];
+        best[b] = cb.score;
+        for a in 0..start_of_sample {
+            let (i, ca) = nodes[a];
+            let lateral = if focal_px > 0.0 { (arc[j] - arc[i]) * ca.depth.min(cb.depth) / focal_px } else { 0.0 };
+            if (ca.depth - cb.depth).abs() <= depth_gap + DEPTH_SLOPE * lateral && best[a] + cb.score > best[b] {
+                best[b] = best[a] + cb.score;
+                previous[b] = a;
+            }
+        }
+    }
+    let Some(mut node) = (0..nodes.len()).max_by(|&a, &b| best[a].total_cmp(&best[b])) else { return Vec::new() };
+    let mut chain = vec![(nodes[node].0, nodes[node].1.depth, nodes[node].1.pixel)];
+    while previous[node] != usize::MAX {
+        node = previous[node];
+        chain.push((nodes[node].0, nodes[node].1.depth, nodes[node].1.pixel));
+    }
+    chain.reverse();
+    chain
 }

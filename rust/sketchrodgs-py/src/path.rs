@@ -12,7 +12,9 @@ use crate::errors::{PathNotFoundError, SketchRodGSError};
 
 fn path_err(err: PathError) -> PyErr {
     match err {
-        PathError::StrokeOnBackground | PathError::EndpointOffObject { .. } => PathNotFoundError::new_err(err.to_string()),
+        PathError::StrokeOnBackground | PathError::StrokeBarelyOnObject { .. } | PathError::StrokeTooShort { .. } => {
+            PathNotFoundError::new_err(err.to_string())
+        }
         _ => SketchRodGSError::new_err(err.to_string()),
     }
 }
@@ -20,12 +22,13 @@ fn path_err(err: PathError) -> PyErr {
 /// Screen-space path under a stroke (see `sketchrodgs.extract_rod` for the public API).
 ///
 /// index (H, W) int32 and depth (H, W) float32 are the index image K and its depth Z; centres
-/// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width.
+/// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width;
+/// `focal_px` is the camera's focal length in pixels (0: unknown); `alpha` (H, W) float32 or None.
 /// Returns {"pieces": [{"pixels": (P, 2) uint32 (col, row), "gaussian_ids": (G,) uint32,
 /// "reached_goal": bool, "lost_pixel": (col, row) | None, "lost_progress": float | None}],
 /// "clean_stroke": (M', 2) float32, "coverage": float}.
 #[pyfunction]
-#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0))]
+#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None))]
 #[allow(clippy::too_many_arguments)]
 fn trace_stroke<'py>(
     py: Python<'py>,
@@ -37,16 +40,23 @@ fn trace_stroke<'py>(
     stroke_weight: f64,
     band_px: f32,
     cover_px: f32,
+    focal_px: f32,
+    alpha: Option<Bound<'py, PyArray2<f32>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (index, depth, centres, stroke) = (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
+    let alpha = alpha.as_ref().map(|a| a.try_readonly()).transpose()?;
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
     check_shape("centres", centres.shape(), &[None, Some(3)])?;
     check_shape("stroke", stroke.shape(), &[None, Some(2)])?;
-    let image = IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?).map_err(path_err)?;
+    let mut image = IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?).map_err(path_err)?;
+    if let Some(alpha) = &alpha {
+        check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
+        image = image.with_alpha(contiguous(alpha, "alpha")?).map_err(path_err)?;
+    }
     let centres: &[[f32; 3]] = as_rows(contiguous(&centres, "centres")?);
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
-    let params = TraceParams { radius, stroke_weight, band_px, cover_px };
+    let params = TraceParams { radius, stroke_weight, band_px, cover_px, focal_px };
     let trace = run_parallel(py, "trace_stroke", || sketchrodgs_path::trace_stroke(&image, centres, stroke, &params))?
         .map_err(path_err)?;
 
@@ -82,7 +92,35 @@ fn trace_stroke<'py>(
     Ok(out)
 }
 
+/// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
+/// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width.
+#[pyfunction]
+#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0))]
+fn estimate_radius<'py>(
+    py: Python<'py>,
+    index: &Bound<'py, PyArray2<i32>>,
+    depth: &Bound<'py, PyArray2<f32>>,
+    alpha: &Bound<'py, PyArray2<f32>>,
+    stroke: &Bound<'py, PyArray2<f32>>,
+    focal_px: f32,
+    band_px: f32,
+) -> PyResult<f32> {
+    let (index, depth, alpha, stroke) = (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
+    let (height, width) = (index.shape()[0], index.shape()[1]);
+    check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
+    check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
+    check_shape("stroke", stroke.shape(), &[None, Some(2)])?;
+    let alpha = contiguous(&alpha, "alpha")?;
+    let image = IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?)
+        .and_then(|image| image.with_alpha(alpha))
+        .map_err(path_err)?;
+    let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
+    let params = TraceParams { band_px, focal_px, ..TraceParams::default() };
+    run_parallel(py, "estimate_radius", || sketchrodgs_path::estimate_radius(&image, stroke, &params))?.map_err(path_err)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(trace_stroke, m)?)?;
+    m.add_function(wrap_pyfunction!(estimate_radius, m)?)?;
     Ok(())
 }

@@ -18,8 +18,8 @@ fn raster_err(err: RasterError) -> PyErr {
 ///
 /// Arrays are float32 and C-contiguous: means (N, 3), scales (N, 3), quats (N, 4) wxyz,
 /// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a dict of numpy
-/// arrays (rgb (H, W, 3), alpha, depth, index (int32), index_depth, each (H, W); the first three
-/// are None when `index_only`), the stage timings in seconds and the visible/pair counts.
+/// arrays (rgb (H, W, 3), alpha, depth, index (int32), index_depth, each (H, W);
+/// (rgb and depth are None when `index_only`), the stage timings in seconds and the visible/pair counts.
 #[pyfunction]
 #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), index_only = false))]
 #[allow(clippy::too_many_arguments)]
@@ -79,13 +79,13 @@ fn into_dict(py: Python<'_>, out: RenderOutput) -> PyResult<Bound<'_, PyDict>> {
     let (h, w) = (out.height, out.width);
     let shape_err = |e: numpy::ndarray::ShapeError| SketchRodGSError::new_err(format!("internal shape error: {e}"));
     let dict = PyDict::new(py);
+    dict.set_item("alpha", Array2::from_shape_vec((h, w), out.alpha).map_err(shape_err)?.into_pyarray(py))?;
     if out.rgb.is_empty() {
-        for key in ["rgb", "alpha", "depth"] {
+        for key in ["rgb", "depth"] {
             dict.set_item(key, py.None())?;
         }
     } else {
         dict.set_item("rgb", Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py))?;
-        dict.set_item("alpha", Array2::from_shape_vec((h, w), out.alpha).map_err(shape_err)?.into_pyarray(py))?;
         dict.set_item("depth", Array2::from_shape_vec((h, w), out.depth).map_err(shape_err)?.into_pyarray(py))?;
     }
     dict.set_item("index", Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py))?;

@@ -37,7 +37,7 @@ pub fn composite(camera: &Camera, splats: &[Splat2D], bins: &TileBins, options: 
         width,
         height,
         rgb: vec![0.0; color_len(pixels * 3)],
-        alpha: vec![0.0; color_len(pixels)],
+        alpha: vec![0.0; pixels], // transmittance is tracked in both modes, so alpha is free
         depth: vec![0.0; color_len(pixels)],
         index: vec![-1; pixels],
         index_depth: vec![0.0; pixels],
@@ -167,9 +167,9 @@ fn render_band<const COLOR: bool>(
                     band.index[o] = id as i32;
                     band.index_depth[o] = g.depth;
                 }
+                let a = 1.0 - t;
+                band.alpha[o] = a;
                 if COLOR {
-                    let a = 1.0 - t;
-                    band.alpha[o] = a;
                     band.depth[o] = if a > 0.0 { state.depth[y][gi][lane] / a } else { 0.0 };
                     let color = [state.red[y][gi][lane], state.green[y][gi][lane], state.blue[y][gi][lane]];
                     for ((out, c), bg) in band.rgb[o * 3..o * 3 + 3].iter_mut().zip(color).zip(background) {

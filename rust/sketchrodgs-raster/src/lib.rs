@@ -193,7 +193,7 @@ pub struct StageTimings {
     pub composite_s: f64,
 }
 
-/// A rendered image set. Images are row-major `[row][col]`; the colour-mode outputs are empty in
+/// A rendered image set. Images are row-major `[row][col]`; `rgb` and `depth` are empty in
 /// [`RenderMode::IndexOnly`].
 #[derive(Clone, Debug, Default)]
 pub struct RenderOutput {

@@ -87,14 +87,15 @@ fn output_is_identical_for_any_thread_count() {
 }
 
 #[test]
-fn index_only_mode_skips_colour_but_keeps_the_index() {
+fn index_only_mode_skips_colour_but_keeps_the_index_and_alpha() {
     let scene = Scene::random(5_000, 4, 2);
     let cam = camera(96, 80);
     let full = render(&scene, &cam);
     let options = RenderOptions { mode: RenderMode::IndexOnly, ..RenderOptions::default() };
     let fast = rasterize(&scene.splats(), &cam, &options).unwrap();
-    assert!(fast.rgb.is_empty() && fast.alpha.is_empty() && fast.depth.is_empty());
+    assert!(fast.rgb.is_empty() && fast.depth.is_empty());
     assert_eq!(fast.index, full.index);
+    assert_eq!(fast.alpha, full.alpha);
     assert_eq!(fast.index_depth, full.index_depth);
 }
 

@@ -1,0 +1,52 @@
+//! The radius from the image (docs/extraction.md, "Radius"): half the object's width across the
+//! stroke (see `width`), in world units at its depth, the median over the stroke's samples on it.
+
+use crate::stroke::{CleanStroke, clean_stroke};
+use crate::width::{cross_width, median, normals};
+use crate::{IndexImage, PathError, TraceParams};
+
+/// Estimate `R` from the object's visible width under `stroke`. `params.focal_px` must be > 0;
+/// `params.radius` is ignored. Two passes: the width under every sample gives a first `R`, with
+/// which the stroke is cleaned (`3R` depth gaps); the width at the clean chain's samples is the
+/// estimate, so samples over an occluder or past the object's end do not count.
+pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TraceParams) -> Result<f32, PathError> {
+    let focal = params.focal_px;
+    if !(focal.is_finite() && focal > 0.0) {
+        return Err(PathError::BadParameter { name: "focal_px", value: f64::from(focal) });
+    }
+    let band_px = if params.band_px > 0.0 { params.band_px } else { TraceParams::default_band_px(image.width) };
+    let max_px = image.width.max(image.height) / 8;
+    // pass 1: a loose clean-up (any depth) only to get the resampled, smoothed samples
+    let loose = clean_stroke(image, stroke, band_px, f32::INFINITY, 0.0, None)?;
+    let under: Vec<Option<usize>> =
+        loose.points.iter().map(|p| image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q))).collect();
+    let first = half_widths(image, &loose, &under, focal, max_px);
+    let Some(rough) = first else { return Err(PathError::StrokeOnBackground) };
+    // pass 2: the depth-consistent chain at that radius
+    let clean = clean_stroke(image, stroke, band_px, crate::depth_gap(image, stroke, rough, focal), focal, None)?;
+    // measure from the pixel under the sample where it is on the chain's surface, else from the
+    // surface's pixel nearest the sample
+    let anchors: Vec<Option<usize>> = clean
+        .anchor
+        .iter()
+        .zip(&clean.points)
+        .map(|(a, p)| {
+            let a = (*a)?;
+            let under = image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q) && (image.depth[q] - image.depth[a]).abs() <= rough);
+            under.or(Some(a).filter(|&q| image.covered(q)))
+        })
+        .collect();
+    Ok(half_widths(image, &clean, &anchors, focal, max_px).unwrap_or(rough))
+}
+
+/// Median half-width in world units over the samples that have a pixel.
+fn half_widths(image: &IndexImage, stroke: &CleanStroke, pixels: &[Option<usize>], focal: f32, max_px: usize) -> Option<f32> {
+    let normal = normals(&stroke.points);
+    let mut values: Vec<f32> = pixels
+        .iter()
+        .zip(&normal)
+        .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
+        .map(|(p, &n)| 0.5 * cross_width(image, p, n, focal, max_px) as f32 * image.depth[p] / focal)
+        .collect();
+    (!values.is_empty()).then(|| median(&mut values))
+}

@@ -1,0 +1,47 @@
+"""The real-capture stroke set (tests/data/real_cases/cases.json) is well formed."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sketchrodgs import Camera, data
+
+ROOT = Path(__file__).parent.parent
+CASES = json.loads((ROOT / "tests" / "data" / "real_cases" / "cases.json").read_text(encoding="utf-8"))
+
+
+def test_scenes_exist() -> None:
+    assert set(CASES["scenes"]) == {"plant", "guitar", "tree", "donut"}
+    for spec in CASES["scenes"].values():
+        path = data.sample(spec.split(":", 1)[1]) if spec.startswith("sample:") else ROOT / spec
+        assert Path(path).is_file(), spec
+
+
+def test_at_least_twelve_parts_over_four_scenes() -> None:
+    names = [case["name"] for case in CASES["cases"]]
+    assert len(names) >= 12 and len(set(names)) == len(names)
+    assert {case["scene"] for case in CASES["cases"]} == set(CASES["scenes"])
+
+
+@pytest.mark.parametrize("case", CASES["cases"], ids=lambda case: case["name"])
+def test_case(case: dict) -> None:
+    assert case["radius"] > 0 and case["description"]
+    assert 2 <= len(case["views"]) <= 3
+    assert len({view["name"] for view in case["views"]}) == len(case["views"])
+    directions = []
+    for view in case["views"]:
+        camera = Camera.from_dict(view["camera"], view["name"])
+        stroke = np.asarray(view["stroke"], dtype=np.float64)
+        assert stroke.ndim == 2 and stroke.shape[1] == 2 and 8 <= len(stroke) <= 25
+        assert (stroke >= 0).all() and (stroke[:, 0] <= camera.width).all() and (stroke[:, 1] <= camera.height).all()
+        directions.append(camera.camera_to_world[:3, 2])
+    # Each view sees the part from a direction 30-90 degrees (within 0.5) from another view's.
+    angles = {(i, j): np.degrees(np.arccos(np.clip(directions[i] @ directions[j], -1, 1)))
+              for i, j in itertools.combinations(range(len(directions)), 2)}
+    for i in range(len(directions)):
+        assert any(29.5 <= a <= 90.5 for pair, a in angles.items() if i in pair)
