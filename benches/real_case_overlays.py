@@ -1,114 +1,81 @@
-"""Overlay PNGs of the real-capture test strokes, for a person to check them.
+"""Overlays of the real-capture cases (tests/data/real_cases): for every case and view, the view
+cropped around the stroke with the stroke (green), the pixel path (red), the rod (blue) and the
+bound Gaussians (yellow), as `sketchrodgs extract --overlay` draws them, so a person can check the
+strokes and what extraction made of them.
 
-For every case and view in tests/data/real_cases/cases.json this renders the view and draws the
-stroke on it in green (its points as small red rings), the case and view named in the corner,
-into OUT_DIR/<case>__<view>.png.
+    python benches/real_case_overlays.py OUT_DIR [--case NAME ...] [--gallery docs/gallery/real_cases.png]
 
-With --extract it also runs `extract_rod(scene, camera, stroke, radius=R)` once per view, draws
-the extracted polyline projected into the view in magenta, prints one line per view (or the
-error), and the agreement between the polylines of each pair of views
-(`consistency.polyline_agreement`, in units of R).
-
-    python benches/real_case_overlays.py OUT_DIR [--case NAME ...] [--extract]
+`--gallery` also writes one picture of the first view of each named case side by side.
 """
 
 from __future__ import annotations
 
 import argparse
-import itertools
-import json
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
 
-import sketchrodgs
-from sketchrodgs import Camera, data, load_scene, render
-from sketchrodgs.consistency import polyline_agreement
+from sketchrodgs import Camera, realcases, render
+from sketchrodgs.errors import PathNotFoundError
+from sketchrodgs.extract import extract_rod
+from sketchrodgs.images import draw_overlay, save_png
 
-ROOT = Path(__file__).resolve().parent.parent
-CASES = ROOT / "tests" / "data" / "real_cases" / "cases.json"
-BACKGROUND = (0.3, 0.3, 0.35)
-
-
-def scene_path(spec: str) -> Path:
-    """A scene entry of cases.json: "sample:NAME" or a path relative to the repository root."""
-    if spec.startswith("sample:"):
-        return Path(data.sample(spec.split(":", 1)[1]))
-    return ROOT / spec
+CASES = Path(__file__).parent.parent / "tests" / "data" / "real_cases" / "cases.json"
+MARGIN_PX = 40
+ZOOM = 2
 
 
-def load_cases(path: Path = CASES) -> dict:
-    with open(path, encoding="utf-8") as f:
-        return json.load(f)
-
-
-def draw(rgb: np.ndarray, stroke: np.ndarray, label: str, polyline_uv: np.ndarray | None) -> Image.Image:
-    image = Image.fromarray((np.clip(rgb, 0, 1) * 255).astype(np.uint8))
-    pen = ImageDraw.Draw(image)
-    if polyline_uv is not None:
-        finite = polyline_uv[np.isfinite(polyline_uv).all(axis=1)]
-        if len(finite) > 1:
-            pen.line([tuple(p) for p in finite], fill=(255, 0, 255), width=1)
-    pen.line([tuple(p) for p in stroke], fill=(0, 255, 0), width=1)
-    for x, y in stroke:
-        pen.ellipse([x - 2, y - 2, x + 2, y + 2], outline=(255, 40, 40))
-    pen.rectangle([0, 0, 8 + 6 * len(label), 14], fill=(0, 0, 0))
-    pen.text((4, 2), label, fill=(255, 255, 0))
-    return image
+def case_view_overlay(scene, case: dict, view: dict) -> tuple[Image.Image, str]:
+    """The cropped, zoomed overlay of one view and a one-line summary."""
+    camera = Camera.from_dict(view["camera"], view["name"])
+    stroke = np.asarray(view["stroke"], np.float64)
+    images = render(scene, camera, background=(1.0, 1.0, 1.0))
+    try:
+        ex = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+        image = draw_overlay(images.rgb, camera, stroke, ex.pixel_path, ex.polyline, scene.means[ex.gaussian_ids])
+        summary = f"{len(ex.polyline)} vertices, {len(ex.gaussian_ids):,} Gaussians, coverage {ex.coverage:.2f}"
+    except PathNotFoundError as err:
+        image = draw_overlay(images.rgb, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", []))
+        summary = f"failed: {err}"
+    low = np.maximum(stroke.min(axis=0) - MARGIN_PX, 0).astype(int)
+    high = np.minimum(stroke.max(axis=0) + MARGIN_PX, [camera.width, camera.height]).astype(int)
+    crop = image.crop((*low, *high))
+    crop = crop.resize((crop.width * ZOOM, crop.height * ZOOM), Image.LANCZOS)
+    ImageDraw.Draw(crop).text((4, 4), f"{case['name']} / {view['name']}", fill=(255, 255, 255))
+    return crop, summary
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out_dir", type=Path)
     parser.add_argument("--case", action="append", help="only this case (repeatable)")
-    parser.add_argument("--extract", action="store_true", help="also run extract_rod per view")
-    parser.add_argument("--cases-file", type=Path, default=CASES)
+    parser.add_argument("--gallery", type=Path, help="also write the first views of these cases side by side")
     args = parser.parse_args()
-    spec = load_cases(args.cases_file)
+    scenes, cases = realcases.load_cases(CASES)
     args.out_dir.mkdir(parents=True, exist_ok=True)
-    scenes: dict[str, sketchrodgs.GaussianScene] = {}
-    failures = 0
-    for case in spec["cases"]:
+    tiles = []
+    for case in cases:
         if args.case and case["name"] not in args.case:
             continue
-        name = case["scene"]
-        if name not in scenes:
-            scenes[name] = load_scene(scene_path(spec["scenes"][name]))
-        scene, radius = scenes[name], float(case["radius"])
-        polylines = {}
-        for view in case["views"]:
-            camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
-            stroke = np.asarray(view["stroke"], dtype=np.float64)
-            images = render(scene, camera, background=BACKGROUND)
-            polyline_uv = None
-            label = f"{case['name']} / {view['name']}  R={radius:g}"
-            if args.extract:
-                start = time.perf_counter()
-                try:
-                    result = sketchrodgs.extract_rod(scene, camera, stroke, radius=radius, render=images)
-                except sketchrodgs.SketchRodGSError as exc:
-                    failures += 1
-                    print(f"{case['name']:28s} {view['name']:6s} FAILED {type(exc).__name__}: {exc}")
-                else:
-                    line = np.asarray(result.polyline, dtype=np.float64)
-                    polylines[view["name"]] = line
-                    polyline_uv, _ = camera.project(line)
-                    length = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-                    print(f"{case['name']:28s} {view['name']:6s} ok  {len(line):4d} vertices, length {length:.4g}, "
-                          f"coverage {result.coverage:.2f}, pieces reached goal {result.pieces_reached_goal}, "
-                          f"{time.perf_counter() - start:.2f} s")
-            image = draw(images.rgb, stroke, label, polyline_uv)
-            image.save(args.out_dir / f"{case['name']}__{view['name']}.png")
-        for (va, a), (vb, b) in itertools.combinations(polylines.items(), 2):
-            agreement = polyline_agreement(a, b, radius)
-            print(f"{case['name']:28s} {va}-{vb}: mean {agreement['mean']:.2f} R, max {agreement['max']:.2f} R, "
-                  f"overlap {agreement['overlap']:.2f}")
-    print(f"overlays in {args.out_dir}")
-    return 1 if failures and args.extract else 0
+        for i, view in enumerate(case["views"]):
+            image, summary = case_view_overlay(scenes[case["scene"]], case, view)
+            save_png(args.out_dir / f"{case['name']}__{view['name']}.png", image)
+            print(f"{case['name']:26s} {view['name']:6s} {summary}")
+            if i == 0:
+                tiles.append(image)
+    if args.gallery and tiles:
+        height = 360
+        tiles = [t.resize((max(1, round(t.width * height / t.height)), height), Image.LANCZOS) for t in tiles]
+        sheet = Image.new("RGB", (sum(t.width for t in tiles) + 4 * (len(tiles) - 1), height), (255, 255, 255))
+        x = 0
+        for tile in tiles:
+            sheet.paste(tile, (x, 0))
+            x += tile.width + 4
+        save_png(args.gallery, sheet)
+        print(f"gallery -> {args.gallery}")
+    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -20,7 +20,17 @@ def trace_stroke(
     stroke_weight: float = 1.0,
     band_px: float = 0.0,
     cover_px: float = 10.0,
+    focal_px: float = 0.0,
+    alpha: npt.NDArray[np.float32] | None = None,
 ) -> dict[str, object]: ...
+def estimate_radius(
+    index: npt.NDArray[np.int32],
+    depth: npt.NDArray[np.float32],
+    alpha: npt.NDArray[np.float32],
+    stroke: npt.NDArray[np.float32],
+    focal_px: float,
+    band_px: float = 0.0,
+) -> float: ...
 def nearest_on_polyline(
     polyline: npt.NDArray[np.float32], points: npt.NDArray[np.float32], reach: float
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...

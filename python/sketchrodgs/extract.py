@@ -22,6 +22,9 @@ from .render import RenderResult, render
 from .scene import GaussianScene
 
 DEFAULT_SMOOTHING_ITERATIONS = 10
+# A path Gaussian's centre must project within this many pixels, or radii, of its path pixel.
+_NEAR_PIXEL_PX = 3.0
+_NEAR_PIXEL_RADII = 2.0
 # Gaussians within this many radii of the axis belong to the object. Surface Gaussians sit at
 # about one radius from the axis, and on real captures their centres scatter well past the visible
 # half-width (the estimated R): at 1.5 R a pulled plant stem left a ghost of itself behind.
@@ -220,24 +223,34 @@ def extract_rod(
         timings["estimate_radius"] = time.perf_counter() - clock
         clock = time.perf_counter()
 
-    try:
-        trace = _core.trace_stroke(index, depth, scene.means, work, float(radius), float(alpha),
-                                   float(band_px or 0.0), focal_px=focal, alpha=opacity)
-    except PathNotFoundError as err:
-        raise _failure(str(err), stroke, []) from None
+    def trace_path(radius: float) -> tuple[dict, list[np.ndarray], np.ndarray, np.ndarray]:
+        """The path at `radius`: the trace, its pixel pieces (user's direction), its Gaussians in
+        order (one visit each) and their centres, lightly smoothed."""
+        try:
+            trace = _core.trace_stroke(index, depth, scene.means, work, float(radius), float(alpha),
+                                       float(band_px or 0.0), focal_px=focal, alpha=opacity)
+        except PathNotFoundError as err:
+            raise _failure(str(err), stroke, []) from None
+        pixel_path = [p["pixels"].astype(np.int64) for p in trace["pieces"]]
+        if flip:
+            pixel_path = [p[::-1] for p in pixel_path[::-1]]
+        path_ids = _near_their_pixels(trace["pieces"], index, scene.means, camera, radius)
+        # The path hops between Gaussians scattered over the surface; a little smoothing takes out
+        # the zigzag before the chain is resampled by arc length.
+        points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
+        return trace, pixel_path, path_ids, points
+
+    trace, pixel_path, path_ids, points = trace_path(radius)
+    found = pl.polyline_length(points) if len(points) > 1 else 0.0
+    if estimated and 0 < found < 2 * radius:
+        # A rod is at least two diameters long, so an estimate that makes the part shorter than that
+        # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length.
+        radius = found / 4
+        trace, pixel_path, path_ids, points = trace_path(radius)
     timings["path_search"] = time.perf_counter() - clock
+    pieces = trace["pieces"]
 
     clock = time.perf_counter()
-    pieces = trace["pieces"]
-    pixel_path = [p["pixels"].astype(np.int64) for p in pieces]
-    if flip:
-        pixel_path = [p[::-1] for p in pixel_path[::-1]]
-    path_ids = np.concatenate([p["gaussian_ids"].astype(np.int64) for p in pieces])
-    _, first = np.unique(path_ids, return_index=True)
-    path_ids = path_ids[np.sort(first)]  # one visit per Gaussian, in path order
-    # The path hops between Gaussians scattered over the surface; a little smoothing takes out the
-    # zigzag before the chain is resampled by arc length.
-    points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
     if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
         length = pl.polyline_length(points) if len(points) > 1 else 0.0
         raise _failure(
@@ -277,6 +290,23 @@ def extract_rod(
         radius_estimated=estimated,
         timings=timings,
     )
+
+
+def _near_their_pixels(pieces: list[dict], index: np.ndarray, means: np.ndarray, camera: Camera,
+                       radius: float) -> np.ndarray:
+    """The Gaussians along the path in order, one visit each, leaving out those whose centre
+    projects far from the pixel where the path met them: a big Gaussian of what the part touches
+    (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's
+    edge while its centre lies far away, and would hook the rod's end towards it."""
+    pixels = np.concatenate([p["pixels"].astype(np.int64) for p in pieces])
+    ids = index[pixels[:, 1], pixels[:, 0]].astype(np.int64)
+    _, first = np.unique(ids, return_index=True)
+    first = np.sort(first)  # first visit of each Gaussian, in path order
+    ids, pixels = ids[first], pixels[first]
+    uv, z = camera.project(means[ids])
+    reach_px = np.maximum(_NEAR_PIXEL_PX, _NEAR_PIXEL_RADII * radius * camera.fx / np.maximum(z, 1e-12))
+    near = (z > 0) & (np.linalg.norm(uv - (pixels + 0.5), axis=1) <= reach_px)
+    return ids[near] if near.sum() >= 2 else ids
 
 
 def _canonical_flip(stroke: np.ndarray) -> bool:

@@ -4,7 +4,7 @@
 //! along the stroke. No single sample decides, the stroke's direction does not matter, and ends
 //! that overshoot the object (onto background or a neighbour) are trimmed instead of refused.
 
-use crate::width::{excess_width, normals};
+use crate::width::{WIDE_CAP, excess_width, normals};
 use crate::{IndexImage, PathError};
 
 /// Spacing of the resampled stroke, in pixels.
@@ -18,10 +18,11 @@ const MAX_CANDIDATES: usize = 4;
 /// samples, on top of `3R`. It matters where the chain skips samples (over an occluder): between
 /// neighbouring samples `3R` alone already follows a steeply receding part.
 const DEPTH_SLOPE: f32 = 1.0;
-/// Score taken off a surface for each radius by which it is wider across the stroke than
-/// `WIDE_FROM` radii (capped at `WIDE_CAP`): the chain prefers the slender part to a leaf or body
-/// beside it at a similar depth.
-const WIDE_SCORE: f32 = 0.15;
+/// Share of a surface's score lost when it is `WIDE_CAP` radii wider across the stroke than
+/// `WIDE_FROM` (in proportion below that): the chain prefers the slender part to a leaf or body
+/// beside it at a similar depth. Scores stay positive, so a wide stretch is still followed where
+/// nothing slender competes (a part in front of a body measures wide there).
+const WIDE_SCORE: f32 = 0.5;
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -227,7 +228,7 @@ fn surfaces_near(
         .map(|s| {
             let near = 1.0 - 0.5 * (s.1 / reach_px.max(1.0)).min(1.0);
             let wide = slender.map_or(0.0, |(radius, focal)| excess_width(image, s.3, normal, focal, radius));
-            Candidate { depth: s.0, score: near - WIDE_SCORE * wide, pixel: s.3 }
+            Candidate { depth: s.0, score: near * (1.0 - WIDE_SCORE * wide / WIDE_CAP), pixel: s.3 }
         })
         .collect()
 }

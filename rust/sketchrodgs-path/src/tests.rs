@@ -221,3 +221,46 @@ fn a_receding_rope_resumes_behind_a_wide_occluder() {
     assert!(trace.clean_stroke.iter().all(|p| !(52.0..68.0).contains(&p[0])));
     assert!(trace.clean_stroke.iter().any(|p| p[0] > 75.0));
 }
+
+#[test]
+fn a_first_point_on_an_occluder_does_not_decide() {
+    // The stroke starts on a pole in front (cols 0..=6, depth 3); the rest runs along the rope.
+    let scene = Synthetic::new(80, 40, FOCAL, |col, row| if col <= 6 { Some(3.0) } else { rope(col, row) });
+    let trace = scene.trace(&[[3.5, 20.5], [20.5, 20.5], [40.5, 20.5], [77.5, 20.5]], 0.05).unwrap();
+    assert_eq!(trace.pieces.len(), 1);
+    let piece = &trace.pieces[0];
+    assert_eq!(piece.end, PieceEnd::Goal);
+    assert!(piece.pixels.iter().all(|p| p[0] > 6), "the path must not use the pole");
+    assert!(piece.pixels.last().unwrap()[0] >= 76);
+    assert_eq!(piece.pixels[0][0], 7, "the path starts where the rope appears from behind the pole");
+}
+
+#[test]
+fn the_path_keeps_off_a_wide_surface_touching_the_part() {
+    // A leaf (rows 22..=34, cols 20..=60) touches the rope from below at the same depth. The stroke
+    // runs 3 px into the leaf: without the width penalty the path would follow the stroke onto it.
+    let leaf = |col: usize, row: usize| ((20..=60).contains(&col) && (22..=34).contains(&row)).then_some(5.0);
+    let scene = Synthetic::new(80, 40, FOCAL, move |col, row| rope(col, row).or_else(|| leaf(col, row)));
+    let stroke = [[2.5, 20.5], [20.5, 24.5], [60.5, 24.5], [77.5, 20.5]];
+    let trace = scene.trace(&stroke, 0.075).unwrap();
+    let on_leaf = trace.pieces.iter().flat_map(|p| p.pixels.iter()).filter(|p| p[1] >= 23).count();
+    assert_eq!(on_leaf, 0, "{} path pixels on the leaf", on_leaf);
+    // the same without the focal length (no width measure) does go onto the leaf
+    let params = TraceParams { radius: 0.075, band_px: 6.0, ..TraceParams::default() };
+    let blind = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
+    assert!(blind.pieces.iter().flat_map(|p| p.pixels.iter()).any(|p| p[1] >= 23));
+}
+
+#[test]
+fn the_radius_is_half_the_visible_width() {
+    // The rope is 3 px thick at depth 5 with a focal length of 100: R = 1.5 px * 5 / 100.
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let radius = estimate_radius(&scene.image(), &[[2.5, 20.5], [40.0, 21.5], [77.5, 20.5]], &params).unwrap();
+    assert!((radius - 0.075).abs() < 0.01, "R = {radius}");
+    // a short stroke, two diameters long, still gives it
+    let short = estimate_radius(&scene.image(), &[[30.5, 20.5], [36.5, 20.5]], &params).unwrap();
+    assert!((short - 0.075).abs() < 0.01, "R = {short}");
+    let unknown_focal = TraceParams { focal_px: 0.0, ..params };
+    assert!(matches!(estimate_radius(&scene.image(), &[[2.5, 20.5], [77.5, 20.5]], &unknown_focal), Err(PathError::BadParameter { name: "focal_px", .. })));
+}

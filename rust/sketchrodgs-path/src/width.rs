@@ -1,7 +1,8 @@
 //! The object's width across the stroke (docs/extraction.md, "Radius" and "Staying on the part"):
 //! from a pixel, walk both ways along the stroke's normal while the surface continues. It
 //! continues while the pixel is covered (alpha >= 0.5 where alpha is known) and its depth stays
-//! within the lateral distance walked of the start's depth: a cylinder's depth rises by less than
+//! within 1.5 times the lateral distance walked of the start's depth (a single stray pixel is
+//! skipped): a cylinder's depth rises by less than
 //! the lateral offset until its silhouette, where the scene behind (or the body a sprinkle sits on)
 //! jumps away. A flat leaf or body facing the camera continues, so it measures wide.
 
@@ -9,6 +10,11 @@ use crate::IndexImage;
 
 /// Depth noise allowance, in pixels of lateral distance (Gaussian centres scatter about the surface).
 const NOISE_PX: f32 = 2.0;
+/// The depth may differ from the start's by this many times the lateral distance walked: a round
+/// part's surface stays within 1 until its silhouette; Gaussian centres scatter past that.
+const SLOPE: f32 = 1.5;
+/// This many failing pixels in a row end the walk.
+const MAX_MISSES: usize = 1;
 
 /// Width in pixels of the surface at pixel `p` across the unit direction `normal`, walking at most
 /// `max_px` each way (then the width is `2 * max_px + 1`).
@@ -18,14 +24,21 @@ pub(crate) fn cross_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_
     let per_px = z0 / focal_px;
     let mut width = 1;
     for sign in [1.0_f32, -1.0] {
+        let (mut run, mut misses) = (0, 0);
         for k in 1..=max_px {
             let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
             let Some(q) = image.pixel_at(x, y) else { break };
-            if !image.covered(q) || (image.depth[q] - z0).abs() > (k as f32).max(NOISE_PX) * per_px {
-                break;
+            if image.covered(q) && (image.depth[q] - z0).abs() <= (SLOPE * k as f32).max(NOISE_PX) * per_px {
+                (run, misses) = (k, 0);
+            } else {
+                // one stray Gaussian (a centre far off the surface) does not end the surface
+                misses += 1;
+                if misses > MAX_MISSES {
+                    break;
+                }
             }
-            width += 1;
         }
+        width += run;
     }
     width
 }

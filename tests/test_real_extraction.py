@@ -1,0 +1,105 @@
+"""Extraction on real captures (tests/data/real_cases: 14 slender parts of the plant, guitar, tree
+and donut captures, 2-3 views each), scored as the issue asks, without a true axis: between views,
+against the reversed stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
+
+What holds on every case is asserted outright. The per-case geometric targets are asserted per
+case; where a case does not meet a target yet it is marked xfail(strict): the test then fails the
+day the case starts to pass, so that the list stays true. The lists are what we measured; the
+reasons are in docs/extraction.md ("Where it still fails").
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sketchrodgs.realcases import TARGETS, load_cases, run_case, score_case
+
+CASES_FILE = Path(__file__).parent / "data" / "real_cases" / "cases.json"
+JITTER = 10
+
+# Measured misses (see the module docstring).
+MISSES = {
+    "cross_given": {"plant_main_stem", "plant_side_stem_long", "plant_side_stem_right", "tree_branch_tall"},
+    "cross_estimated": {"plant_main_stem", "plant_side_stem_long", "plant_side_stem_right", "tree_branch_tall",
+                        "guitar_stand_leg_right"},
+    "jitter": {"donut_sprinkle_a", "donut_sprinkle_b", "guitar_stand_foot_front", "guitar_stand_leg_left",
+               "guitar_stand_leg_right", "plant_main_stem", "plant_side_stem_left", "plant_side_stem_long",
+               "plant_side_stem_right", "tree_branch_lower_left", "tree_branch_tall"},
+    "radius": {"donut_sprinkle_a", "donut_sprinkle_b", "guitar_neck", "guitar_stand_foot_front", "guitar_stand_leg_left",
+               "guitar_stand_leg_right", "plant_main_stem", "plant_side_stem_long", "plant_side_stem_right",
+               "tree_twig_v"},
+}
+
+
+@pytest.fixture(scope="module")
+def scored():
+    scenes, cases = load_cases(CASES_FILE)
+    results = {}
+    for case in cases:
+        views = run_case(scenes[case["scene"]], case, jitter=JITTER)
+        results[case["name"]] = (views, score_case(case, views))
+    return results
+
+
+def _names() -> list[str]:
+    return [case["name"] for case in json.loads(CASES_FILE.read_text(encoding="utf-8"))["cases"]]
+
+
+def per_case(target: str):
+    """Parametrise over the cases, strict-xfail where `target` is a measured miss."""
+    return pytest.mark.parametrize("name", [
+        pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=f"{target} not met yet")) if n in MISSES[target] else n
+        for n in _names()
+    ])
+
+
+def test_no_unjittered_stroke_fails(scored):
+    """Every stroke as drawn, with R given, with R estimated and reversed, gives a rod."""
+    for name, (views, _) in scored.items():
+        for view in views:
+            assert view.given is not None and view.estimated is not None and view.reversed is not None, \
+                (name, view.name, view.errors)
+
+
+def test_at_most_3_percent_of_jittered_strokes_fail(scored):
+    failures = sum(score.jitter_failures for _, score in scored.values())
+    count = sum(score.jitter_count for _, score in scored.values())
+    assert count >= 12 * 2 * JITTER
+    assert failures <= TARGETS["jitter_fail_share"] * count, f"{failures} of {count} jittered strokes failed"
+
+
+def test_the_reversed_stroke_gives_the_same_rod(scored):
+    for name, (_, score) in scored.items():
+        assert score.reverse_max <= TARGETS["reverse_max"], (name, score.reverse_max)
+
+
+@per_case("cross_given")
+def test_views_agree_with_radius_given(scored, name):
+    score = scored[name][1]
+    assert score.cross_mean <= TARGETS["cross_mean"] and score.cross_max <= TARGETS["cross_max"], \
+        (score.cross_mean, score.cross_max)
+
+
+@per_case("cross_estimated")
+def test_views_agree_with_radius_estimated(scored, name):
+    score = scored[name][1]
+    assert score.cross_mean_estimated <= TARGETS["cross_mean"] and score.cross_max_estimated <= TARGETS["cross_max"], \
+        (score.cross_mean_estimated, score.cross_max_estimated)
+
+
+@per_case("jitter")
+def test_jittered_strokes_give_the_same_rod(scored, name):
+    score = scored[name][1]
+    assert score.jitter_mean <= TARGETS["jitter_mean"] and score.jitter_max <= TARGETS["jitter_max"], \
+        (score.jitter_mean, score.jitter_max)
+
+
+@per_case("radius")
+def test_radius_estimate_matches_the_visible_radius(scored, name):
+    score = scored[name][1]
+    assert TARGETS["radius_low"] <= score.radius_low and score.radius_high <= TARGETS["radius_high"], \
+        (score.radius_low, score.radius_high)
+    assert score.radius_spread <= TARGETS["radius_spread"], score.radius_spread
