@@ -205,13 +205,8 @@ def extract_rod(
         timings["render"] = time.perf_counter() - clock
     if render.index.shape != (camera.height, camera.width):
         raise SketchRodGSError(f"render: index image is {render.index.shape}, camera is {camera.height}x{camera.width}")
-    index = np.ascontiguousarray(render.index, np.int32)
-    depth = np.ascontiguousarray(render.index_depth, np.float32)
-    opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
+    index, depth, opacity, work, flip = _search_inputs(render, stroke)
     focal = float(camera.fx)
-    # The search is run in one canonical direction, so a stroke and its reverse give the same rod.
-    flip = _canonical_flip(stroke)
-    work = np.ascontiguousarray(stroke[::-1] if flip else stroke)
 
     clock = time.perf_counter()
     estimated = radius is None
@@ -309,11 +304,17 @@ def _near_their_pixels(pieces: list[dict], index: np.ndarray, means: np.ndarray,
     return ids[near] if near.sum() >= 2 else ids
 
 
-def _canonical_flip(stroke: np.ndarray) -> bool:
-    """Whether to run the search on the reversed stroke: it always starts at the end that comes
-    first in (x, y) order, so the result does not depend on the direction the stroke was drawn."""
-    first, last = stroke[0], stroke[-1]
-    return bool((last[0], last[1]) < (first[0], first[1]))
+def _search_inputs(render: RenderResult, stroke: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+    """The arrays the Rust search takes: index, index depth, opacity (covered pixels where the
+    render has no alpha), and the stroke in the canonical direction with whether it was flipped.
+    The search always starts at the stroke end that comes first in (x, y) order, so the result
+    does not depend on the direction the stroke was drawn."""
+    index = np.ascontiguousarray(render.index, np.int32)
+    depth = np.ascontiguousarray(render.index_depth, np.float32)
+    opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
+    flip = bool((stroke[-1, 0], stroke[-1, 1]) < (stroke[0, 0], stroke[0, 1]))
+    work = np.ascontiguousarray(stroke[::-1] if flip else stroke, np.float32)
+    return index, depth, opacity, work, flip
 
 
 def _failure(message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list | None = None) -> PathNotFoundError:
@@ -350,9 +351,5 @@ def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, ba
     """R from the object's visible width under `stroke` (docs/extraction.md, "Radius"): half the
     width of the surface across the stroke, where it stays solid (alpha >= 0.5) and its depth does
     not jump, in world units at its depth; the median over the stroke's samples on the object."""
-    stroke = _check_stroke(stroke)
-    index = np.ascontiguousarray(render.index, np.int32)
-    opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
-    work = np.ascontiguousarray(stroke[::-1] if _canonical_flip(stroke) else stroke)
-    return float(_core.estimate_radius(index, np.ascontiguousarray(render.index_depth, np.float32), opacity, work,
-                                       float(camera.fx), float(band_px or 0.0)))
+    index, depth, opacity, work, _ = _search_inputs(render, _check_stroke(stroke))
+    return float(_core.estimate_radius(index, depth, opacity, work, float(camera.fx), float(band_px or 0.0)))

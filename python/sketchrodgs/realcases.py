@@ -20,6 +20,7 @@ import numpy as np
 
 from . import consistency as cs
 from .camera import Camera
+from .data import sample
 from .errors import PathNotFoundError
 from .extract import Extraction, extract_rod
 from .io import load_scene
@@ -40,12 +41,8 @@ def load_cases(path: str | os.PathLike[str]) -> tuple[dict[str, GaussianScene], 
     data = json.loads(path.read_text(encoding="utf-8"))
     scenes = {}
     for name, spec in data["scenes"].items():
-        if spec.startswith("sample:"):
-            from .data import sample
-
-            scenes[name] = load_scene(sample(spec.split(":", 1)[1]))
-        else:
-            scenes[name] = load_scene(root / spec)
+        path = sample(spec.removeprefix("sample:")) if spec.startswith("sample:") else root / spec
+        scenes[name] = load_scene(path)
     return scenes, data["cases"]
 
 

@@ -15,8 +15,6 @@ pub(crate) struct Band {
     pub pixel: Vec<u32>,
     /// Stroke segment of each node.
     pub segment: Vec<u32>,
-    /// Parameter along that segment, in [0, 1].
-    pub t: Vec<f32>,
     /// Distance in pixels from the pixel centre to that segment.
     pub distance: Vec<f32>,
     /// Arc length along the clean stroke at (segment, t), in pixels.
@@ -42,7 +40,6 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
         node_of_pixel: vec![NO_NODE; image.width * image.height],
         pixel: Vec::new(),
         segment: Vec::new(),
-        t: Vec::new(),
         distance: Vec::new(),
         arc: Vec::new(),
     };
@@ -74,17 +71,15 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
                         band.node_of_pixel[p] = band.pixel.len() as u32;
                         band.pixel.push(p as u32);
                         band.segment.push(i as u32);
-                        band.t.push(t);
                         band.distance.push(d);
-                        band.arc.push(stroke.arc[i] + t * (stroke.arc[i + 1] - stroke.arc[i]));
+                        band.arc.push(stroke.arc_at(i, t));
                     }
                     // strict: at a shared vertex the earlier segment keeps the pixel
                     node if d < band.distance[node as usize] => {
                         let node = node as usize;
                         band.segment[node] = i as u32;
-                        band.t[node] = t;
                         band.distance[node] = d;
-                        band.arc[node] = stroke.arc[i] + t * (stroke.arc[i + 1] - stroke.arc[i]);
+                        band.arc[node] = stroke.arc_at(i, t);
                     }
                     _ => {}
                 }

@@ -2,7 +2,7 @@
 //! stroke (see `width`), in world units at its depth, the median over the stroke's samples on it.
 
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{cross_width, median, normals};
+use crate::width::{cross_width, median};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// Estimate `R` from the object's visible width under `stroke`. `params.focal_px` must be > 0;
@@ -41,10 +41,9 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
 
 /// Median half-width in world units over the samples that have a pixel.
 fn half_widths(image: &IndexImage, stroke: &CleanStroke, pixels: &[Option<usize>], focal: f32, max_px: usize) -> Option<f32> {
-    let normal = normals(&stroke.points);
     let mut values: Vec<f32> = pixels
         .iter()
-        .zip(&normal)
+        .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
         .map(|(p, &n)| 0.5 * cross_width(image, p, n, focal, max_px) as f32 * image.depth[p] / focal)
         .collect();

@@ -6,7 +6,7 @@ use std::collections::{BinaryHeap, HashSet};
 
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{excess_width, normals};
+use crate::width::excess_width;
 use crate::{IndexImage, PathError, TraceParams};
 
 /// How a piece of the path ended.
@@ -207,7 +207,6 @@ impl<'a> Search<'a> {
         }
         self.touched.clear();
         let (width, height) = (self.image.width as i64, self.image.height as i64);
-        let max_gap = self.gap;
         let half_width = self.image.width as f64 / 2.0;
         let mut heap = BinaryHeap::new();
         self.cost[start] = 0.0;
@@ -244,7 +243,7 @@ impl<'a> Search<'a> {
                 // a depth gap: never step onto another surface. Depth, not centre distance: on real
                 // captures neighbouring pixels' Gaussians can be big and far apart sideways.
                 let (za, zb) = (self.image.depth[pixel], self.image.depth[self.band.pixel[b] as usize]);
-                if (za - zb).abs() > max_gap {
+                if (za - zb).abs() > self.gap {
                     continue;
                 }
                 let deviation = f64::from(self.band.distance[b]) / half_width;
@@ -283,11 +282,10 @@ fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &
     if focal <= 0.0 {
         return vec![0.0; band.len()];
     }
-    let normal = normals(&stroke.points);
     (0..band.len())
         .map(|node| {
             let p = band.pixel[node] as usize;
-            let excess = excess_width(image, p, normal[band.segment[node] as usize], focal, params.radius);
+            let excess = excess_width(image, p, stroke.normal[band.segment[node] as usize], focal, params.radius);
             WIDE_WEIGHT * f64::from(excess) * f64::from(image.depth[p] / focal)
         })
         .collect()

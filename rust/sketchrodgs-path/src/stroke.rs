@@ -36,6 +36,8 @@ pub(crate) struct CleanStroke {
     pub anchor: Vec<Option<usize>>,
     /// Screen arc length from the first sample, in pixels.
     pub arc: Vec<f32>,
+    /// Unit normal of the stroke at each sample (the direction widths are measured in).
+    pub normal: Vec<[f32; 2]>,
 }
 
 impl CleanStroke {
@@ -46,6 +48,11 @@ impl CleanStroke {
     /// The object's expected depth at parameter `t` of segment `i`.
     pub fn depth_at(&self, i: usize, t: f32) -> f32 {
         self.depth[i] + t * (self.depth[i + 1] - self.depth[i])
+    }
+
+    /// Screen arc length at parameter `t` of segment `i`.
+    pub fn arc_at(&self, i: usize, t: f32) -> f32 {
+        self.arc[i] + t * (self.arc[i + 1] - self.arc[i])
     }
 }
 
@@ -110,7 +117,7 @@ pub(crate) fn clean_stroke(
         anchor[i - first] = Some(pixel);
     }
     let arc = arc[first..=last].iter().map(|s| s - arc[first]).collect();
-    Ok(CleanStroke { points: points[first..=last].to_vec(), depth, anchor, arc })
+    Ok(CleanStroke { points: points[first..=last].to_vec(), depth, anchor, arc, normal: normal[first..=last].to_vec() })
 }
 
 /// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed.
