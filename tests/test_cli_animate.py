@@ -51,7 +51,10 @@ def test_animate_writes_frames_video_and_ply(ring_rod, tmp_path):
     with Image.open(out / "pull.gif") as gif:
         assert gif.is_animated and gif.n_frames >= 10  # Pillow merges identical frames at rest
     plys = sorted((out / "ply").glob("frame_*.ply"))
-    assert len(plys) == 20 and plyfile.PlyData.read(plys[9])["vertex"].count == 10_000
+    source = json.loads((out / "ply" / "source.json").read_text())
+    rows = source["source"]  # the input's rows, then the pieces of split needles
+    assert source["input_gaussians"] == 10_000 and rows[:10_000] == list(range(10_000)) and max(rows) < 10_000
+    assert len(plys) == 20 and plyfile.PlyData.read(plys[9])["vertex"].count == len(rows)
     assert "20 frames" in result.stdout
 
 

@@ -74,3 +74,23 @@ def test_extract_rejects_a_malformed_stroke_file(tmp_path):
     result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
                      str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"))
     assert result.returncode == 1 and "stroke.json" in result.stderr
+
+
+def test_extract_can_leave_attached_parts_behind(tmp_path):
+    """The plant sample's stem has leaves on it: by default they follow the rod, with --no-attach not."""
+    camera, stroke = data.sample_camera("plant"), data.sample_stroke("plant")
+    camera.save(tmp_path / "cam.json")
+    (tmp_path / "stroke.json").write_text(json.dumps({"points": stroke.tolist()}))
+    rods = {}
+    for name, extra in (("default", []), ("none", ["--no-attach"]), ("small", ["--attach-size", "1e-4"])):
+        result = run_cli("extract", "sample:plant", "--camera", str(tmp_path / "cam.json"), "--stroke",
+                         str(tmp_path / "stroke.json"), "-o", str(tmp_path / f"{name}.json"), *extra)
+        assert result.returncode == 0, result.stderr
+        rods[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    assert sum(rods["default"]["binding"]["attached"]) > 100
+    for name in ("none", "small"):
+        assert sum(rods[name]["binding"]["attached"]) == 0
+        assert len(rods[name]["gaussian_ids"]) < len(rods["default"]["gaussian_ids"])
+    result = run_cli("extract", "sample:plant", "--camera", str(tmp_path / "cam.json"), "--stroke",
+                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "x.json"), "--attach-size", "-1")
+    assert result.returncode == 2 and "attach-size" in result.stderr

@@ -257,7 +257,7 @@ def test_skinning_on_demand_matches_skinning_every_frame(ring, ring_rod):
     pull(eager, a.id)
     pull(lazy, b.id)
     assert np.array_equal(lazy.means, ring.means)  # not skinned yet
-    means, quats = lazy.skinned()
+    means, quats, _ = lazy.skinned()
     np.testing.assert_allclose(means, eager.means, atol=1e-6)
     np.testing.assert_allclose(lazy.deformed_scene().quats, eager.quats, atol=1e-6)
 
@@ -281,7 +281,7 @@ def test_display_sends_where_the_gaussians_are(server, ring, ring_rod, update):
     pull(rods, entry.id)
     with rods.lock:
         display.push(rods)
-        means, _ = rods.skinned()
+        means, _, _ = rods.skinned()
         want = means[entry.gaussian_ids].astype(np.float64)
     nodes = display._rods[entry.id]
     if update == "exact":

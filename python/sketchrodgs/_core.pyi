@@ -122,16 +122,24 @@ class RodWorld:
     def forces(self, rod: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
     def params(self, rod: int) -> dict[str, Any]: ...
 
+def linked_components(points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], link: float) -> npt.NDArray[np.int64]: ...
+def linked_to(
+    points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], source: int, target: int, link: float
+) -> npt.NDArray[np.int64]: ...
 def skin_scatter(
+    rest: npt.NDArray[np.float32],
     deformed: npt.NDArray[np.float32],
     vertex_rotation: npt.NDArray[np.float32],
     segment: npt.NDArray[np.int32],
     t: npt.NDArray[np.float32],
     offset: npt.NDArray[np.float32],
     rest_quats: npt.NDArray[np.float32],
+    rest_scales: npt.NDArray[np.float32],
+    weight: npt.NDArray[np.float32],
     ids: npt.NDArray[np.int64],
     means: npt.NDArray[np.float32],
     quats: npt.NDArray[np.float32],
+    scales: npt.NDArray[np.float32],
 ) -> None: ...
 
 F32 = npt.NDArray[np.float32]

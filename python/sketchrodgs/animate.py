@@ -17,7 +17,7 @@ from .errors import SketchRodGSError
 from .extract import Extraction
 from .rod import Rod, RodParams, World
 from .scene import GaussianScene
-from .skin import BoundRod, skin_into
+from .skin import DEFAULT_END_RAMP, Rig, skin_into
 
 
 @dataclass(frozen=True)
@@ -91,17 +91,24 @@ class Animation:
         params: material per rod (a single one is used for all); its radius is replaced by each
             extraction's radius.
         clamp_ends: clamp both ends of every rod, as the authors' app does.
+        subdivide: split needle Gaussians along the rods first (`Rig`); the animated scene then
+            has more rows than `scene`, and `rig.source` maps them back.
+        end_ramp: the motion eases in over this many R from a clamped end (`Rig.build`).
+
+    Attributes:
+        rest_scene: the scene the frames deform (the rig's: `scene` with needles split).
+        means, quats, scales: its arrays now, updated by every frame.
     """
 
     def __init__(self, scene: GaussianScene, extractions: Sequence[Extraction],
-                 params: RodParams | Sequence[RodParams] = RodParams(), clamp_ends: bool = True) -> None:
+                 params: RodParams | Sequence[RodParams] = RodParams(), clamp_ends: bool = True,
+                 subdivide: bool = True, end_ramp: float = DEFAULT_END_RAMP) -> None:
         if not extractions:
             raise SketchRodGSError("no rods to animate")
         per_rod = [params] * len(extractions) if isinstance(params, RodParams) else list(params)
         self.scene = scene
         self.world = World()
         self.rods: list[Rod] = []
-        self.bound: list[BoundRod] = []
         for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
             if len(extraction.gaussian_ids) and extraction.gaussian_ids.max() >= len(scene):
                 raise SketchRodGSError(
@@ -112,13 +119,15 @@ class Animation:
                 rod.clamp(0)
                 rod.clamp(-1)
             self.rods.append(rod)
-            self.bound.append(BoundRod.from_extraction(scene, extraction, rod))
-        self.means = scene.means.copy()
-        self.quats = scene.quats.copy()
+        self.rig = Rig.build(scene, extractions, self.rods, subdivide=subdivide, end_ramp=end_ramp)
+        self.rest_scene = self.rig.scene
+        self.means = self.rest_scene.means.copy()
+        self.quats = self.rest_scene.quats.copy()
+        self.scales = self.rest_scene.scales.copy()
 
     def current_scene(self) -> GaussianScene:
         """The deformed scene now (a new scene sharing nothing mutable with the animation)."""
-        return self.scene.replace(means=self.means.copy(), quats=self.quats.copy())
+        return self.rest_scene.replace(means=self.means.copy(), quats=self.quats.copy(), scales=self.scales.copy())
 
     def frames(self, pull: Pull, fps: float) -> Iterator[Frame]:
         """Simulate `pull` at `fps` frames per second, skinning after every frame."""
@@ -148,6 +157,6 @@ class Animation:
             self.world.step(dt)
             timings["simulate"] = time.perf_counter() - clock
             clock = time.perf_counter()
-            skin_into(self.means, self.quats, self.bound, self.rods)
+            skin_into(self.means, self.quats, self.scales, self.rig.bound, self.rods)
             timings["skin"] = time.perf_counter() - clock
             yield Frame(index, t, phase, timings)

@@ -74,7 +74,7 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
         timings["simulate"] = timings.get("simulate", 0.0) + frame.timings["simulate"]
         timings["skin"] = timings.get("skin", 0.0) + frame.timings["skin"]
         clock = time.perf_counter()
-        rgb = to_uint8(render(scene.replace(means=animation.means, quats=animation.quats), camera, background=BACKGROUND).rgb)
+        rgb = to_uint8(render(animation.current_scene(), camera, background=BACKGROUND).rgb)
         lap("render frames")
         save_png(out / "frames" / f"frame_{frame.index:04d}.png", rgb)
         lap("write images")

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import _core
 from . import polyline as pl
+from . import segment as sg
 from .atomic import atomic_write_text
 from .camera import Camera
 from .errors import PathNotFoundError, SketchRodGSError
@@ -25,10 +26,6 @@ DEFAULT_SMOOTHING_ITERATIONS = 10
 # A path Gaussian's centre must project within this many pixels, or radii, of its path pixel.
 _NEAR_PIXEL_PX = 3.0
 _NEAR_PIXEL_RADII = 2.0
-# Gaussians within this many radii of the axis belong to the object. Surface Gaussians sit at
-# about one radius from the axis, and on real captures their centres scatter well past the visible
-# half-width (the estimated R): at 1.5 R a pulled plant stem left a ghost of itself behind.
-DEFAULT_SEGMENT_SCALE = 2.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,8 +38,9 @@ class Extraction:
         edge_length: target spacing of the polyline vertices.
         pixel_path: list of (P_i, 2) int arrays, the (col, row) pixels of each path piece.
         path_gaussian_ids: (L,) int64 Gaussians along the pixel path, in order (pieces joined).
-        gaussian_ids: (G,) int64 segmented Gaussians (within `segment_scale * R` of the polyline).
-        binding: where each segmented Gaussian sits on the rest polyline.
+        gaussian_ids: (G,) int64 the Gaussians that follow the rod (the part and its attached
+            parts; docs/deformation.md), rows of the input scene.
+        binding: where each sits on the rest polyline.
         coverage: fraction of the stroke within 10 px of the path.
         radius_estimated: whether `radius` was estimated from the image (not given).
         pieces_reached_goal: whether each piece reached the stroke's end (False: lost at a gap).
@@ -57,7 +55,7 @@ class Extraction:
     pixel_path: list[np.ndarray]
     path_gaussian_ids: np.ndarray
     gaussian_ids: np.ndarray
-    binding: pl.Binding
+    binding: sg.Binding
     coverage: float
     pieces_reached_goal: list[bool]
     camera: Camera
@@ -78,6 +76,7 @@ class Extraction:
                 "segment": self.binding.segment.tolist(),
                 "t": self.binding.t.tolist(),
                 "offset": self.binding.offset.tolist(),
+                "attached": self.binding.attached.astype(int).tolist(),
             },
             "coverage": self.coverage,
             "material": material or {},
@@ -109,6 +108,7 @@ class Extraction:
         offset = _array(binding.get("offset"), np.float32, (g, 3), f"{source}: binding.offset")
         if g and (segment.min() < 0 or segment.max() >= len(polyline) - 1):
             raise SketchRodGSError(f"{source}: binding.segment: values must be in 0..{len(polyline) - 2}")
+        attached = _array(binding.get("attached", np.zeros(g)), np.int64, (g,), f"{source}: binding.attached") != 0
         distance = np.linalg.norm(offset, axis=1).astype(np.float32)
         return cls(
             polyline=polyline,
@@ -117,7 +117,7 @@ class Extraction:
             pixel_path=[],
             path_gaussian_ids=np.empty(0, np.int64),
             gaussian_ids=ids,
-            binding=pl.Binding(ids, segment, t, offset, distance),
+            binding=sg.Binding(ids, segment, t, offset, distance, attached),
             coverage=float(data.get("coverage", float("nan"))),
             pieces_reached_goal=[],
             camera=Camera.from_dict(data["camera"], f"{source}: camera"),
@@ -158,7 +158,9 @@ def extract_rod(
     band_px: float | None = None,
     edge_length: float | None = None,
     smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS,
-    segment_scale: float = DEFAULT_SEGMENT_SCALE,
+    segment_scale: float = sg.DEFAULT_GROW,
+    attach: bool = True,
+    attach_size: float | None = None,
     recentre: bool = True,
     render: RenderResult | None = None,
 ) -> Extraction:
@@ -174,7 +176,11 @@ def extract_rod(
         band_px: half-width of the band around the stroke (default 1 % of the image width).
         edge_length: polyline spacing (default from R and the object's length).
         smoothing_iterations: Laplacian smoothing steps before resampling (ends fixed).
-        segment_scale: Gaussians within `segment_scale * R` of the axis are segmented.
+        segment_scale: the part's cross-section reaches `segment_scale * R` from the axis (grown
+            from the axis over neighbouring Gaussians; docs/deformation.md, "Segmentation").
+        attach: small parts attached to the part (a leaf, a tag) ride rigidly with the rod.
+        attach_size: the largest attached part, in world units (default: a quarter of the rod's
+            length, at least 8 R).
         recentre: move the visible surface points onto the axis (our addition; the paper keeps them).
         render: a render of `scene` by `camera` with `index`, `index_depth` and `alpha` (made if
             None; without alpha, widths are measured on the index image alone).
@@ -197,6 +203,8 @@ def extract_rod(
         raise SketchRodGSError(f"radius: must be finite and > 0, got {radius}")
     if band_px is not None and not (np.isfinite(band_px) and band_px > 0):
         raise SketchRodGSError(f"band_px: must be finite and > 0, got {band_px}")
+    if attach_size is not None and not (np.isfinite(attach_size) and attach_size > 0):
+        raise SketchRodGSError(f"attach_size: must be finite and > 0, got {attach_size}")
     if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
         raise SketchRodGSError(f"edge_length: must be finite and > 0, got {edge_length}")
 
@@ -266,7 +274,8 @@ def extract_rod(
     timings["polyline"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    binding = pl.bind_nearest(polyline, scene.means, segment_scale * radius)
+    binding = sg.segment_and_bind(polyline, scene, radius, grow=segment_scale, attach=attach,
+                                  attach_size=attach_size)
     timings["segment_bind"] = time.perf_counter() - clock
     # every piece but the last ends at a gap, in either direction, so the flags need no reversal
     reached = [bool(p["reached_goal"]) for p in pieces]

@@ -1,5 +1,5 @@
 """Polyline post-processing (DESIGN.md, "Polyline, segmentation, binding"): recentre visible surface
-points onto the object's axis, smooth, resample, and find and bind the Gaussians of the object.
+points onto the object's axis, smooth, resample (segmentation and binding: `segment`).
 
 Smoothing, resampling and the recentring and binding logic are numpy; the two per-Gaussian loops
 (nearest point on the polyline, cross-section sums) run in Rust (`sketchrodgs-polyline`), where
@@ -7,8 +7,6 @@ they take about a millisecond instead of tens. Shapes are in the docstrings.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -120,46 +118,6 @@ def resample(points: np.ndarray, edge_length: float) -> np.ndarray:
     edges = max(1, int(round(arc[-1] / edge_length))) if edge_length > 0 else 1
     s = np.linspace(0.0, arc[-1], edges + 1)
     return np.stack([np.interp(s, arc, points[:, k]) for k in range(3)], axis=1)
-
-
-@dataclass(frozen=True, eq=False)
-class Binding:
-    """Where each segmented Gaussian sits on the rest polyline.
-
-    Attributes:
-        gaussian_ids: (G,) int64 rows of the scene.
-        segment: (G,) int32 polyline segment index i (between vertices i and i + 1).
-        t: (G,) float32 parameter on that segment, in [0, 1].
-        offset: (G, 3) float32 centre minus the rest point at (segment, t), in world axes at rest.
-        distance: (G,) float32 distance from the centre to the rest polyline.
-    """
-
-    gaussian_ids: np.ndarray
-    segment: np.ndarray
-    t: np.ndarray
-    offset: np.ndarray
-    distance: np.ndarray
-
-
-def bind_nearest(polyline: np.ndarray, centres: np.ndarray, reach: float) -> Binding:
-    """Find the Gaussians within `reach` of the polyline and bind each to its nearest point on it.
-
-    Args:
-        polyline: (M, 3) rest polyline, M >= 2.
-        centres: (N, 3) Gaussian centres (all of the scene).
-        reach: segmentation distance.
-    """
-    polyline = np.asarray(polyline, np.float64)
-    candidates = near_box(polyline, centres, reach)
-    segment, t, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centres[candidates]), reach)
-    inside = segment >= 0
-    ids, segment, t, distance = candidates[inside], segment[inside], t[inside], distance[inside]
-    a = polyline[segment]
-    rest_points = a + t[:, None].astype(np.float64) * (polyline[segment + 1] - a)
-    return Binding(
-        ids.astype(np.int64), segment.astype(np.int32), t.astype(np.float32),
-        (centres[ids] - rest_points).astype(np.float32), distance.astype(np.float32),
-    )
 
 
 def _f32(array: np.ndarray) -> np.ndarray:

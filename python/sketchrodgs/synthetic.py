@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .scene import GaussianScene
 
@@ -133,3 +134,50 @@ def loop(u: np.ndarray) -> np.ndarray:
     """A prolate cycloid: its projection along z crosses itself once; the strands are 0.14 apart in z."""
     v = (u - 0.5) * 2 * np.pi
     return np.stack([0.1 * v - 0.25 * np.sin(v), 0.25 * np.cos(v) - 0.05, 0.08 * np.sin(v / 2)], axis=1)
+
+
+# -- an exact deformation, the ground truth for skinning -----------------------------------------
+
+def bend_into_arc(points: np.ndarray, start: float, length: float, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """The continuum map that bends the straight band `start <= x <= start + length` (axis along x
+    at y = 0) into a circular arc of `angle` radians turning towards +y, fixed at x = start; beyond
+    the band the material moves rigidly with its end (x < start does not move).
+
+    Args:
+        points: (N, 3) points at rest.
+
+    Returns:
+        (N, 3) mapped points and (N, 3, 3) the map's Jacobian at each point (rotation about z by the
+        local angle times a stretch of 1 - kappa y along the axis).
+    """
+    p = np.asarray(points, np.float64)
+    kappa = angle / length
+    s = np.clip(p[:, 0] - start, 0.0, length)
+    beyond = p[:, 0] - start - s  # past either end, along x
+    phi = kappa * s
+    rho = 1.0 / kappa - p[:, 1]
+    out = np.empty_like(p)
+    out[:, 0] = start + rho * np.sin(phi) + beyond * np.cos(phi)
+    out[:, 1] = 1.0 / kappa - rho * np.cos(phi) + beyond * np.sin(phi)
+    out[:, 2] = p[:, 2]
+    inside = (p[:, 0] >= start) & (p[:, 0] <= start + length)
+    along = np.where(inside, 1.0 - kappa * p[:, 1], 1.0)
+    c, sn = np.cos(phi), np.sin(phi)
+    jacobian = np.zeros((len(p), 3, 3))
+    jacobian[:, 0, 0], jacobian[:, 1, 0] = c * along, sn * along
+    jacobian[:, 0, 1], jacobian[:, 1, 1] = -sn, c
+    jacobian[:, 2, 2] = 1.0
+    return out, jacobian
+
+
+def deform_exactly(scene: GaussianScene, mapped: np.ndarray, jacobian: np.ndarray) -> GaussianScene:
+    """`scene` with each Gaussian moved to `mapped` and its covariance carried by `jacobian`
+    (J Sigma J^T, diagonalised again into a rotation and scales)."""
+    axes = Rotation.from_quat(scene.quats[:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
+    scales = scene.scales.astype(np.float64)
+    covariance = jacobian @ axes @ (scales[:, :, None] ** 2 * np.transpose(axes, (0, 2, 1))) @ np.transpose(jacobian, (0, 2, 1))
+    values, vectors = np.linalg.eigh(covariance)
+    vectors[np.linalg.det(vectors) < 0, :, 0] *= -1  # a proper rotation
+    quats = Rotation.from_matrix(vectors).as_quat()[:, [3, 0, 1, 2]]
+    return scene.replace(means=mapped.astype(np.float32), scales=np.sqrt(np.maximum(values, 1e-20)).astype(np.float32),
+                         quats=quats.astype(np.float32))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..animate import Animation, Pull
+from ..atomic import atomic_write_text
 from ..camera import load_cameras, select_camera
 from ..errors import SketchRodGSError
 from ..extract import load_rod
@@ -45,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--density", type=positive, default=defaults.density, help=f"density in kg/m^3 (default {defaults.density:g})")
     parser.add_argument("--damping", type=non_negative, default=defaults.damping, metavar="RATE", help=f"damping rate in 1/s (default {defaults.damping:g})")
     parser.add_argument("--no-clamp", action="store_true", help="leave the rod ends free instead of clamping them")
+    parser.add_argument("--no-subdivide", action="store_true",
+                        help="move each Gaussian with one binding point (needles then stick out of bends); with "
+                             "--ply the frames then keep the scene's rows")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,18 +62,22 @@ def run(args: argparse.Namespace) -> int:
     if args.width:
         camera = camera.resized(args.width)
     params = RodParams(youngs_modulus=args.youngs_modulus, density=args.density, damping=args.damping)
-    animation = Animation(scene, extractions, params, clamp_ends=not args.no_clamp)
+    animation = Animation(scene, extractions, params, clamp_ends=not args.no_clamp, subdivide=not args.no_subdivide)
     pull = Pull(args.grab, args.to, args.duration, args.hold, args.release, args.settle)
     out = Path(args.output)
     (out / "frames").mkdir(parents=True, exist_ok=True)
     if args.ply:
         (out / "ply").mkdir(exist_ok=True)
+        # the frames carry the split needles: the input's rows first, then the extra pieces
+        source = {"input_gaussians": len(scene), "source": animation.rig.source.tolist(),
+                  "note": "row i of each frame comes from row source[i] of the input scene (docs/deformation.md)"}
+        atomic_write_text(out / "ply" / "source.json", json.dumps(source) + "\n")
     totals: dict[str, float] = {}
     images = []
     count = int(round(pull.total * args.fps))
     for frame in tqdm(animation.frames(pull, args.fps), total=count, unit="frame", desc="animate"):
         clock = time.perf_counter()
-        deformed = scene.replace(means=animation.means, quats=animation.quats)
+        deformed = animation.current_scene()
         rgb = to_uint8(render(deformed, camera).rgb)
         frame.timings["render"] = time.perf_counter() - clock
         clock = time.perf_counter()

@@ -28,6 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--radius", type=positive, help="the object's radius R in scene units (default: estimated)")
     parser.add_argument("--alpha", type=float, default=1.0, help="weight of the stroke term of the path cost (default 1)")
     parser.add_argument("--edge-length", type=positive, help="spacing of the polyline vertices (default: from R and length)")
+    parser.add_argument("--no-attach", action="store_true",
+                        help="only the part follows the rod, not the small parts attached to it (leaves, a tag)")
+    parser.add_argument("--attach-size", type=positive, metavar="SIZE",
+                        help="largest attached part that follows, in scene units (default: half the rod's length)")
     parser.add_argument("-o", "--output", required=True, metavar="ROD.json", help="rod JSON to write")
     parser.add_argument("--overlay", metavar="OVERLAY.png", help="also draw the render with stroke, path and polyline")
 
@@ -52,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     images = render(scene, camera, outputs="all" if args.overlay else "index")
     try:
         extraction = extract_rod(scene, camera, stroke, args.radius, alpha=args.alpha, edge_length=args.edge_length,
-                                 render=images)
+                                 attach=not args.no_attach, attach_size=args.attach_size, render=images)
     except PathNotFoundError as err:
         if args.overlay:  # show what was found and where it stopped, so the user sees what to change
             overlay = draw_overlay(images.rgb, camera, stroke, getattr(err, "pixel_path", []),

@@ -67,7 +67,6 @@ class RodNodes:
     splats: list[Any]
     segments: list[int]  # for "segments": the rod segment of each splat node
     part: SplatArrays  # the rod's Gaussians at rest
-    scales: np.ndarray  # (G, 3) their scales
     packer: SplatPacker
     sent_poses: np.ndarray  # for "segments": (S, 7) wxyz + position last sent per node
     polyline: Any
@@ -93,7 +92,6 @@ class SceneDisplay:
         self.server = server
         self.splats = SplatArrays.from_scene(scene)
         self.unit = splat_unit(scene.scales)  # every splat node has this scale (see splats.py)
-        self._scales = scene.scales
         self.update = update
         self._on_handle_drag = on_handle_drag
         self._scene_node: Any = None
@@ -169,7 +167,7 @@ class SceneDisplay:
         poses = np.zeros((len(segments), 7))
         poses[:, 0] = 1.0
         poses[:, 4:] = np.asarray(entry.rod.rest_positions, np.float64)[segments]
-        self._rods[entry.id] = RodNodes(splats, segments, part, self._scales[ids], SplatPacker(part.rgbs, part.opacities),
+        self._rods[entry.id] = RodNodes(splats, segments, part, SplatPacker(part.rgbs, part.opacities),
                                         poses, polyline, handles, segmented, colours)
 
     def remove_rod(self, rod_id: int) -> None:
@@ -202,7 +200,7 @@ class SceneDisplay:
                     ids = entry.gaussian_ids
                     unit = np.float32(self.unit)
                     nodes.splats[0].buffer = nodes.packer.pack(
-                        rods.means[ids] / unit, covariance_triu(nodes.scales / unit, rods.quats[ids]))
+                        rods.means[ids] / unit, covariance_triu(rods.scales[ids] / unit, rods.quats[ids]))
                 else:
                     poses = np.concatenate([matrices_to_quats(entry.edge_rotations()),
                                             np.asarray(entry.rod.positions, np.float64)[:-1]], axis=1)[nodes.segments]

@@ -37,6 +37,8 @@ class Panel:
                                               hint="rod edge length in scene units; 0 for the default")
             self.working_width = gui.add_number("Working width", working_width, min=64, max=4096, step=1,
                                                 hint="pixels across the render the stroke is traced on")
+            self.attach = gui.add_checkbox("Attached parts follow", True,
+                                           hint="small parts joined to the rod (leaves, a tag) ride with it")
         with gui.add_folder("Rod material"):
             self.youngs_modulus = gui.add_number("Stiffness E (Pa)", params.youngs_modulus, min=1.0, step=1e5,
                                                  hint="Young's modulus; changing it restarts the rods from rest")
@@ -65,6 +67,7 @@ class Panel:
             radius=None if self.auto_radius.value else float(self.radius.value),
             alpha=float(self.alpha.value),
             edge_length=float(self.edge_length.value) or None,
+            attach=bool(self.attach.value),
         )
 
     def rod_params(self, down: Any) -> RodParams:

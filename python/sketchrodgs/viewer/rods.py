@@ -17,10 +17,9 @@ import numpy as np
 
 from ..errors import SketchRodGSError
 from ..extract import Extraction
-from ..polyline import Binding
 from ..rod import Rod, RodParams, World
 from ..scene import GaussianScene
-from ..skin import BoundRod, skin_into
+from ..skin import BoundRod, clamped_end_weights, skin_into
 
 # A rod sleeps (is no longer stepped or sent) once no vertex moved more than this fraction of
 # its length per frame for SLEEP_FRAMES frames in a row, with nothing grabbed.
@@ -68,9 +67,10 @@ class RodSet:
             `deformed_scene` skin on demand (for displays that move Gaussians by segment poses).
 
     Attributes:
-        means, quats: (N, 3) and (N, 4) float32, the scene's Gaussians as last skinned (rows of
-            no rod stay at rest); see `skinned`.
-        lock: held by every method; hold it to read `means`, `quats` or the rods consistently.
+        means, quats, scales: (N, 3), (N, 4) and (N, 3) float32, the scene's Gaussians as last
+            skinned (rows of no rod stay at rest); see `skinned`.
+        lock: held by every method; hold it to read `means`, `quats`, `scales` or the rods
+            consistently.
     """
 
     def __init__(self, scene: GaussianScene, params: RodParams = RodParams(), clamp_ends: bool = True,
@@ -83,6 +83,7 @@ class RodSet:
         self.lock = threading.RLock()
         self.means = scene.means.copy()
         self.quats = scene.quats.copy()
+        self.scales = scene.scales.copy()
         self._world = World()
         self._entries: list[RodEntry] = []
         self._next_id = 0
@@ -148,6 +149,7 @@ class RodSet:
             ids = entry.gaussian_ids
             self.means[ids] = self.scene.means[ids]
             self.quats[ids] = self.scene.quats[ids]
+            self.scales[ids] = self.scene.scales[ids]
             self.version += 1
 
     def clear(self) -> None:
@@ -164,6 +166,7 @@ class RodSet:
             self._previous = [np.asarray(e.rod.positions) for e in self._entries]
             self.means[:] = self.scene.means
             self.quats[:] = self.scene.quats
+            self.scales[:] = self.scene.scales
             self._stale = False
             self._awake = False
             self.version += 1
@@ -184,6 +187,7 @@ class RodSet:
                         entry.rod.clamp(end)
                     else:
                         entry.rod.free(end)
+                entry.bound = _eased(entry.bound, entry)
             self.wake()
 
     def _build(self, rod_id: int, extraction: Extraction, world: World) -> RodEntry:
@@ -195,7 +199,9 @@ class RodSet:
         bound = BoundRod.from_extraction(self.scene, extraction, rod)
         polyline = np.asarray(extraction.polyline, np.float64)
         length = float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
-        return RodEntry(rod_id, extraction, rod, bound, np.array(rod.edge_frames, np.float64), length)
+        entry = RodEntry(rod_id, extraction, rod, bound, np.array(rod.edge_frames, np.float64), length)
+        entry.bound = _eased(bound, entry)
+        return entry
 
     # ----- interaction -----
 
@@ -265,28 +271,33 @@ class RodSet:
             return {"simulate": simulate, "skin": skin}
 
     def _skin(self) -> None:
-        skin_into(self.means, self.quats, [e.bound for e in self._entries], [e.rod for e in self._entries])
+        skin_into(self.means, self.quats, self.scales, [e.bound for e in self._entries], [e.rod for e in self._entries])
         self._stale = False
 
-    def skinned(self) -> tuple[np.ndarray, np.ndarray]:
-        """(means, quats) of the scene now, skinning first if a step left them stale (hold `lock`
-        while using them)."""
+    def skinned(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(means, quats, scales) of the scene now, skinning first if a step left them stale (hold
+        `lock` while using them)."""
         with self.lock:
             if self._stale:
                 self._skin()
-            return self.means, self.quats
+            return self.means, self.quats, self.scales
 
     def deformed_scene(self) -> GaussianScene:
         """The scene now (copies)."""
         with self.lock:
-            means, quats = self.skinned()
-            return self.scene.replace(means=means.copy(), quats=quats.copy())
+            means, quats, scales = self.skinned()
+            return self.scene.replace(means=means.copy(), quats=quats.copy(), scales=scales.copy())
+
+
+def _eased(bound: BoundRod, entry: RodEntry) -> BoundRod:
+    """`bound` with its motion easing in at the rod's clamped ends (docs/deformation.md)."""
+    weight = clamped_end_weights(entry.extraction.binding, entry.rod, entry.extraction).astype(np.float32)
+    return dataclasses.replace(bound, weight=weight)
 
 
 def _keep_binding(extraction: Extraction, keep: np.ndarray) -> Extraction:
     """`extraction` with only the bound Gaussians where `keep` is True."""
     if keep.all():
         return extraction
-    b = extraction.binding
-    binding = Binding(b.gaussian_ids[keep], b.segment[keep], b.t[keep], b.offset[keep], b.distance[keep])
+    binding = extraction.binding.take(keep)
     return dataclasses.replace(extraction, gaussian_ids=binding.gaussian_ids, binding=binding)

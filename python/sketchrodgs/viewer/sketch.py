@@ -27,11 +27,14 @@ class SketchSettings:
         radius: R in scene units, or None to estimate it.
         alpha: weight of the stroke-distance term (paper Eq. 1).
         edge_length: rod edge length in scene units, or None for the default.
+        attach: small parts attached to the rod (leaves, a headstock) ride with it
+            (docs/deformation.md).
     """
 
     radius: float | None = None
     alpha: float = 1.0
     edge_length: float | None = None
+    attach: bool = True
 
 
 @dataclass
@@ -73,4 +76,4 @@ def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> E
     if len(stroke.screen) < 2:
         raise SketchRodGSError("the stroke is a single point: drag across the object")
     return extract_rod(scene, stroke.camera, stroke.pixels(), settings.radius, alpha=settings.alpha,
-                       edge_length=settings.edge_length)
+                       edge_length=settings.edge_length, attach=settings.attach)

@@ -18,6 +18,8 @@
 
 use rayon::prelude::*;
 
+pub mod proximity;
+
 /// What makes a query impossible.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PolylineError {

@@ -1,4 +1,5 @@
-//! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`.
+//! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
+//! `_core.linked_components(...)`, `_core.linked_to(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -65,8 +66,50 @@ fn cross_section_centroids<'py>(
     Ok((centroids.into_pyarray(py), counts.into_pyarray(py)))
 }
 
+/// Components of the links between `points` (N, 3) float32 at most `link` apart within the same
+/// `group` (N,) uint8 (255: no links). Returns (N,) int64 labels 0, 1, ... (-1 for group 255).
+#[pyfunction]
+fn linked_components<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    group: &Bound<'py, PyArray1<u8>>,
+    link: f32,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (points, group) = (points.try_readonly()?, group.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    check_shape("group", group.shape(), &[Some(points.shape()[0])])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let group = contiguous(&group, "group")?;
+    let labels = run_parallel(py, "linked_components", || sketchrodgs_polyline::proximity::linked_components(points, group, link))?
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    Ok(labels.iter().map(|&l| if l == u32::MAX { -1 } else { i64::from(l) }).collect::<Vec<i64>>().into_pyarray(py))
+}
+
+/// For each of `points` in group `source`, the lowest-numbered point of group `target` within
+/// `link` (see `linked_components`). Returns (N,) int64, -1 where there is none.
+#[pyfunction]
+fn linked_to<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    group: &Bound<'py, PyArray1<u8>>,
+    source: u8,
+    target: u8,
+    link: f32,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (points, group) = (points.try_readonly()?, group.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    check_shape("group", group.shape(), &[Some(points.shape()[0])])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let group = contiguous(&group, "group")?;
+    let found = run_parallel(py, "linked_to", || sketchrodgs_polyline::proximity::linked_to(points, group, source, target, link))?
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    Ok(found.iter().map(|n| n.map_or(-1, i64::from)).collect::<Vec<i64>>().into_pyarray(py))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
+    m.add_function(wrap_pyfunction!(linked_components, m)?)?;
+    m.add_function(wrap_pyfunction!(linked_to, m)?)?;
     Ok(())
 }

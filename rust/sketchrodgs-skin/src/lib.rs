@@ -1,7 +1,13 @@
-//! Skinning (DESIGN.md, "Skinning"): each Gaussian bound to a rod at `(segment, t)` with rest
-//! offset `o` follows the rigid transform of its binding point. Its centre becomes the deformed
-//! point at `(segment, t)` plus `Q(t) o`, and its rotation `Q(t) q`, where `Q(t)` blends the
-//! rotations that carry the rest vertex frames at the segment's two ends to their deformed frames.
+//! Skinning (docs/deformation.md, "Skinning"): each Gaussian bound to a rod at `(segment, t)` with
+//! rest offset `o` and weight `w` follows the transform of its binding point. Where `w = 1` its
+//! centre becomes the deformed point at `(segment, t)` plus `Q(t) o`, where `Q(t)` blends the
+//! rotations that carry the rest vertex frames at the segment's two ends to their deformed frames;
+//! where `w < 1` (the blend band at the boundary with the static scene) it moves that fraction of
+//! the way, and turns by that fraction of `Q(t)`.
+//!
+//! The covariance follows the deformation's Jacobian `F = Q(t) (I + (s - 1) τ τᵀ)`: the rotation,
+//! and the segment's stretch `s` (length now over length at rest) along its rest direction `τ`, so
+//! a stretched rod opens no gaps. `F Σ Fᵀ` is re-diagonalised into a rotation and scales.
 //!
 //! Blending rotations (not positions) along each segment is what keeps a bent rod's skin from
 //! tearing at a joint: a Gaussian at the end of one segment and one at the start of the next get
@@ -11,18 +17,23 @@
 //!
 //! ```
 //! use glam::{Quat, Vec3};
-//! use sketchrodgs_skin::{Binding, skin, wxyz};
+//! use sketchrodgs_skin::{Binding, Pose, skin, wxyz};
 //! // A two-vertex rod along x, moved up by 1 and turned a quarter turn about z.
 //! let turn = Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
+//! let rest = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
 //! let deformed = [[0.0, 1.0, 0.0], (Vec3::Y + turn * Vec3::X).to_array()];
-//! let rotations = [wxyz(turn), wxyz(turn)];
-//! let binding = Binding { segment: &[0], t: &[0.5], offset: &[[0.0, 0.0, 0.1]], rotation: &[[1.0, 0.0, 0.0, 0.0]] };
-//! let (means, quats) = skin(&deformed, &rotations, &binding).unwrap();
-//! assert!((Vec3::from(means[0]) - Vec3::new(0.0, 1.5, 0.1)).length() < 1e-6);
-//! assert!((quats[0][0] - wxyz(turn)[0]).abs() < 1e-6);
+//! let pose = Pose { rest: &rest, deformed: &deformed, rotation: &[wxyz(turn), wxyz(turn)] };
+//! let binding = Binding {
+//!     segment: &[0], t: &[0.5], offset: &[[0.0, 0.0, 0.1]], rotation: &[[1.0, 0.0, 0.0, 0.0]],
+//!     scale: &[[0.1, 0.01, 0.01]], weight: &[1.0],
+//! };
+//! let skinned = skin(&pose, &binding).unwrap();
+//! assert!((Vec3::from(skinned.means[0]) - Vec3::new(0.0, 1.5, 0.1)).length() < 1e-6);
+//! assert!((skinned.quats[0][0] - wxyz(turn)[0]).abs() < 1e-6);
+//! assert!((skinned.scales[0][0] - 0.1).abs() < 1e-6); // no stretch: the scales stay
 //! ```
 
-use glam::{Quat, Vec3};
+use glam::{DMat3, DQuat, Quat, Vec3};
 use rayon::prelude::*;
 
 /// What makes skinning impossible. Each names the offending input.
@@ -30,14 +41,27 @@ use rayon::prelude::*;
 pub enum SkinError {
     #[error("rod needs at least 2 vertices, got {0}")]
     TooFewVertices(usize),
-    #[error("{vertices} deformed vertices but {rotations} vertex rotations")]
-    RotationCount { vertices: usize, rotations: usize },
-    #[error("binding arrays disagree in length: segment {segment}, t {t}, offset {offset}, rotation {rotation}")]
-    BindingLengths { segment: usize, t: usize, offset: usize, rotation: usize },
+    #[error("{vertices} deformed vertices but {rotations} vertex rotations and {rest} rest vertices")]
+    RotationCount { vertices: usize, rotations: usize, rest: usize },
+    #[error("binding arrays disagree in length: segment {segment}, t {t}, offset {offset}, rotation {rotation}, scale {scale}, weight {weight}")]
+    BindingLengths { segment: usize, t: usize, offset: usize, rotation: usize, scale: usize, weight: usize },
+    #[error("output arrays hold {got} rows but the binding has {want}")]
+    OutputLength { got: usize, want: usize },
     #[error("binding {index} refers to segment {segment} but the rod has {segments} segments")]
     SegmentOutOfRange { index: usize, segment: u32, segments: usize },
-    #[error("deformed vertex {0} is not finite")]
-    NonFiniteVertex(usize),
+    #[error("{which} vertex {index} is not finite")]
+    NonFiniteVertex { which: &'static str, index: usize },
+    #[error("rest segment {0} has zero length")]
+    ZeroLengthSegment(usize),
+}
+
+/// The rod: its vertices at rest and now, and each vertex frame's rotation from rest to now
+/// (`R_now * R_rest^T`, `w, x, y, z`; the identity at rest).
+#[derive(Debug, Clone, Copy)]
+pub struct Pose<'a> {
+    pub rest: &'a [[f32; 3]],
+    pub deformed: &'a [[f32; 3]],
+    pub rotation: &'a [[f32; 4]],
 }
 
 /// Where each Gaussian sits on the rest rod (all slices the same length).
@@ -51,6 +75,10 @@ pub struct Binding<'a> {
     pub offset: &'a [[f32; 3]],
     /// The Gaussian's rotation at rest, `w, x, y, z`.
     pub rotation: &'a [[f32; 4]],
+    /// The Gaussian's scales at rest.
+    pub scale: &'a [[f32; 3]],
+    /// How much of the motion it takes, in `[0, 1]`.
+    pub weight: &'a [f32],
 }
 
 impl Binding<'_> {
@@ -75,96 +103,226 @@ fn blend(a: Quat, b: Quat, t: f32) -> Quat {
     (a * (1.0 - t) + b * t).normalize()
 }
 
-/// New centres and rotations (`w, x, y, z`) of the bound Gaussians.
-pub type Skinned = (Vec<[f32; 3]>, Vec<[f32; 4]>);
+/// New centres, rotations (`w, x, y, z`) and scales of the bound Gaussians.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skinned {
+    pub means: Vec<[f32; 3]>,
+    pub quats: Vec<[f32; 4]>,
+    pub scales: Vec<[f32; 3]>,
+}
 
-/// Skin the bound Gaussians: their new centres and rotations.
-///
-/// `deformed[i]` is rod vertex `i` now and `vertex_rotation[i]` the rotation (`w, x, y, z`) from
-/// its rest frame to its current frame (`R_now * R_rest^T`; the identity at rest).
-pub fn skin(deformed: &[[f32; 3]], vertex_rotation: &[[f32; 4]], binding: &Binding) -> Result<Skinned, SkinError> {
-    check(deformed, vertex_rotation, binding)?;
-    let mut means = vec![[0.0; 3]; binding.len()];
-    let mut quats = vec![[1.0, 0.0, 0.0, 0.0]; binding.len()];
-    skin_into(deformed, vertex_rotation, binding, &mut means, &mut quats);
-    Ok((means, quats))
+/// Skin the bound Gaussians: their new centres, rotations and scales.
+pub fn skin(pose: &Pose, binding: &Binding) -> Result<Skinned, SkinError> {
+    let n = binding.len();
+    let mut out = Skinned { means: vec![[0.0; 3]; n], quats: vec![[1.0, 0.0, 0.0, 0.0]; n], scales: vec![[0.0; 3]; n] };
+    skin_in_place(pose, binding, &mut out.means, &mut out.quats, &mut out.scales)?;
+    Ok(out)
 }
 
 /// [`skin`] writing into caller-owned buffers (the interactive path reuses them every frame).
 pub fn skin_in_place(
-    deformed: &[[f32; 3]],
-    vertex_rotation: &[[f32; 4]],
+    pose: &Pose,
     binding: &Binding,
     means: &mut [[f32; 3]],
     quats: &mut [[f32; 4]],
+    scales: &mut [[f32; 3]],
 ) -> Result<(), SkinError> {
-    check(deformed, vertex_rotation, binding)?;
-    if means.len() != binding.len() || quats.len() != binding.len() {
-        return Err(SkinError::BindingLengths { segment: binding.len(), t: binding.len(), offset: means.len(), rotation: quats.len() });
+    let segments = check(pose, binding)?;
+    for got in [means.len(), quats.len(), scales.len()] {
+        if got != binding.len() {
+            return Err(SkinError::OutputLength { got, want: binding.len() });
+        }
     }
-    skin_into(deformed, vertex_rotation, binding, means, quats);
+    skin_into(pose, &segments, binding, means, quats, scales);
     Ok(())
 }
 
-fn check(deformed: &[[f32; 3]], vertex_rotation: &[[f32; 4]], binding: &Binding) -> Result<(), SkinError> {
-    if deformed.len() < 2 {
-        return Err(SkinError::TooFewVertices(deformed.len()));
+/// Per rest segment: its unit direction at rest and its stretch now.
+struct Segment {
+    direction: Vec3,
+    stretch: f32,
+}
+
+fn check(pose: &Pose, binding: &Binding) -> Result<Vec<Segment>, SkinError> {
+    let m = pose.deformed.len();
+    if m < 2 {
+        return Err(SkinError::TooFewVertices(m));
     }
-    if vertex_rotation.len() != deformed.len() {
-        return Err(SkinError::RotationCount { vertices: deformed.len(), rotations: vertex_rotation.len() });
+    if pose.rotation.len() != m || pose.rest.len() != m {
+        return Err(SkinError::RotationCount { vertices: m, rotations: pose.rotation.len(), rest: pose.rest.len() });
     }
     let n = binding.len();
-    if binding.t.len() != n || binding.offset.len() != n || binding.rotation.len() != n {
-        return Err(SkinError::BindingLengths {
-            segment: n,
-            t: binding.t.len(),
-            offset: binding.offset.len(),
-            rotation: binding.rotation.len(),
-        });
+    let lengths = [binding.t.len(), binding.offset.len(), binding.rotation.len(), binding.scale.len(), binding.weight.len()];
+    if lengths.iter().any(|&l| l != n) {
+        let [t, offset, rotation, scale, weight] = lengths;
+        return Err(SkinError::BindingLengths { segment: n, t, offset, rotation, scale, weight });
     }
-    if let Some(i) = deformed.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
-        return Err(SkinError::NonFiniteVertex(i));
+    for (which, vertices) in [("deformed", pose.deformed), ("rest", pose.rest)] {
+        if let Some(index) = vertices.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+            return Err(SkinError::NonFiniteVertex { which, index });
+        }
     }
-    let segments = deformed.len() - 1;
+    let segments = m - 1;
     if let Some(index) = binding.segment.iter().position(|&s| s as usize >= segments) {
         return Err(SkinError::SegmentOutOfRange { index, segment: binding.segment[index], segments });
     }
-    Ok(())
+    (0..segments)
+        .map(|i| {
+            let rest = Vec3::from(pose.rest[i + 1]) - Vec3::from(pose.rest[i]);
+            let now = Vec3::from(pose.deformed[i + 1]) - Vec3::from(pose.deformed[i]);
+            let length = rest.length();
+            if length <= 0.0 {
+                return Err(SkinError::ZeroLengthSegment(i));
+            }
+            Ok(Segment { direction: rest / length, stretch: now.length() / length })
+        })
+        .collect()
 }
 
 const CHUNK: usize = 4096;
+// Below this relative stretch the covariance only turns.
+const STRETCH_EPSILON: f32 = 1e-4;
+// Below this one, each of the Gaussian's own axes is stretched by its share of the rod's
+// direction, keeping the axes: exact when an axis lies along the rod, and within 2 % of the exact
+// covariance otherwise, where 2 % of stretch opens no visible gap. Above it the stretched
+// covariance is re-diagonalised exactly (and costs several times as much).
+const EXACT_FROM: f32 = 0.02;
 
 fn skin_into(
-    deformed: &[[f32; 3]],
-    vertex_rotation: &[[f32; 4]],
+    pose: &Pose,
+    segments: &[Segment],
     binding: &Binding,
     means: &mut [[f32; 3]],
     quats: &mut [[f32; 4]],
+    scales: &mut [[f32; 3]],
 ) {
-    means.par_chunks_mut(CHUNK).zip(quats.par_chunks_mut(CHUNK)).enumerate().for_each(|(chunk, (means, quats))| {
-        let start = chunk * CHUNK;
-        for (k, (mean, rotated)) in means.iter_mut().zip(quats.iter_mut()).enumerate() {
-            let g = start + k;
-            let i = binding.segment[g] as usize;
-            let t = binding.t[g].clamp(0.0, 1.0);
-            let rotation = blend(quat(vertex_rotation[i]), quat(vertex_rotation[i + 1]), t);
-            let point = Vec3::from(deformed[i]).lerp(Vec3::from(deformed[i + 1]), t);
-            *mean = (point + rotation * Vec3::from(binding.offset[g])).to_array();
-            *rotated = wxyz((rotation * quat(binding.rotation[g])).normalize());
+    means.par_chunks_mut(CHUNK).zip(quats.par_chunks_mut(CHUNK)).zip(scales.par_chunks_mut(CHUNK)).enumerate().for_each(
+        |(chunk, ((means, quats), scales))| {
+            let start = chunk * CHUNK;
+            for (k, ((mean, rotated), scaled)) in means.iter_mut().zip(quats.iter_mut()).zip(scales.iter_mut()).enumerate() {
+                let g = start + k;
+                let i = binding.segment[g] as usize;
+                let t = binding.t[g].clamp(0.0, 1.0);
+                let w = binding.weight[g].clamp(0.0, 1.0);
+                let offset = Vec3::from(binding.offset[g]);
+                let mut rotation = blend(quat(pose.rotation[i]), quat(pose.rotation[i + 1]), t);
+                let point = Vec3::from(pose.deformed[i]).lerp(Vec3::from(pose.deformed[i + 1]), t);
+                let mut centre = point + rotation * offset;
+                if w < 1.0 {
+                    let rest = Vec3::from(pose.rest[i]).lerp(Vec3::from(pose.rest[i + 1]), t) + offset;
+                    centre = rest.lerp(centre, w);
+                    rotation = blend(Quat::IDENTITY, rotation, w);
+                }
+                *mean = centre.to_array();
+                let own = quat(binding.rotation[g]);
+                let stretch = 1.0 + w * (segments[i].stretch - 1.0);
+                if (stretch - 1.0).abs() < STRETCH_EPSILON {
+                    *rotated = wxyz((rotation * own).normalize());
+                    *scaled = binding.scale[g];
+                } else if (stretch - 1.0).abs() < EXACT_FROM {
+                    *rotated = wxyz((rotation * own).normalize());
+                    *scaled = stretched_axes(own, binding.scale[g], segments[i].direction, stretch);
+                } else {
+                    let (turn, new_scale) = stretched(own, binding.scale[g], segments[i].direction, stretch);
+                    *rotated = wxyz((rotation * own * turn).normalize());
+                    *scaled = new_scale;
+                }
+            }
+        },
+    );
+}
+
+/// The scales of a Gaussian stretched by `stretch` along `direction`, each own axis `e_k`
+/// lengthened to `|(I + ε d dᵀ) e_k|` (`d` the direction in the Gaussian's axes).
+fn stretched_axes(own: Quat, scale: [f32; 3], direction: Vec3, stretch: f32) -> [f32; 3] {
+    let d = own.inverse() * direction;
+    let grow = stretch * stretch - 1.0; // |(I + ε d dᵀ) e_k|² = 1 + (2ε + ε²) d_k²
+    [scale[0] * (1.0 + grow * d.x * d.x).sqrt(), scale[1] * (1.0 + grow * d.y * d.y).sqrt(), scale[2] * (1.0 + grow * d.z * d.z).sqrt()]
+}
+
+/// A Gaussian (rotation `own`, scales `scale`) stretched by `stretch` along the world direction
+/// `direction`: the rotation to apply after `own` and the new scales. In the Gaussian's own axes
+/// the stretched covariance is `M Mᵀ` with `M = (I + ε d dᵀ) S`, nearly diagonal for a modest
+/// stretch, so two Jacobi sweeps diagonalise it (to 3e-4 of the covariance, measured in its own
+/// metric, for stretches up to 30 %, thin Gaussians included). In f64: squaring the scales of a thin
+/// Gaussian (1e-3 of its length) would lose its thickness in f32.
+fn stretched(own: Quat, scale: [f32; 3], direction: Vec3, stretch: f32) -> (Quat, [f32; 3]) {
+    let d = (own.inverse() * direction).as_dvec3();
+    let s = Vec3::from(scale).as_dvec3();
+    let e = f64::from(stretch) - 1.0;
+    let m = DMat3::from_diagonal(s) + e * DMat3::from_cols(d * (d.x * s.x), d * (d.y * s.y), d * (d.z * s.z));
+    let (vectors, values) = jacobi_eigen(m * m.transpose());
+    let turn = DQuat::from_mat3(&vectors).normalize().as_quat();
+    // the singular values of M are at least min(1, stretch) * min(S), which also keeps them > 0
+    let floor = f64::from(stretch).min(1.0) * s.min_element();
+    let scale = values.map(|v| v.max(0.0).sqrt().max(floor) as f32);
+    (turn, scale)
+}
+
+const JACOBI_SWEEPS: usize = 2;
+
+/// Eigenvectors (columns of a proper rotation) and eigenvalues of a symmetric 3x3 matrix that is
+/// nearly diagonal, by two sweeps of cyclic Jacobi rotations.
+fn jacobi_eigen(matrix: DMat3) -> (DMat3, [f64; 3]) {
+    let mut a = matrix.to_cols_array_2d(); // symmetric: a[i][j] = A_ij
+    let mut v = [[1.0_f64, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; // v[col][row]
+    for _sweep in 0..JACOBI_SWEEPS {
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            let apq = a[p][q];
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A <- Jᵀ A J with J the rotation in the (p, q) plane
+            for row in a.iter_mut() {
+                let (akp, akq) = (row[p], row[q]);
+                row[p] = c * akp - s * akq;
+                row[q] = s * akp + c * akq;
+            }
+            let (row_p, row_q) = (a[p], a[q]);
+            for k in 0..3 {
+                a[p][k] = c * row_p[k] - s * row_q[k];
+                a[q][k] = s * row_p[k] + c * row_q[k];
+            }
+            let (col_p, col_q) = (v[p], v[q]);
+            for k in 0..3 {
+                v[p][k] = c * col_p[k] - s * col_q[k];
+                v[q][k] = s * col_p[k] + c * col_q[k];
+            }
         }
-    });
+    }
+    (DMat3::from_cols_array_2d(&v), [a[0][0], a[1][1], a[2][2]])
 }
 
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use glam::Mat3;
 
     fn straight_rod(n: usize) -> Vec<[f32; 3]> {
         (0..n).map(|i| [i as f32 * 0.1, 0.0, 0.0]).collect()
     }
 
     const ID: [f32; 4] = [1.0, 0.0, 0.0, 0.0];
+
+    /// A binding whose scale and weight arrays are `n` copies of `scale` and 1.
+    struct Rows {
+        scale: Vec<[f32; 3]>,
+        weight: Vec<f32>,
+    }
+
+    fn rows(n: usize) -> Rows {
+        Rows { scale: vec![[0.02, 0.01, 0.005]; n], weight: vec![1.0; n] }
+    }
+
+    fn covariance(q: [f32; 4], s: [f32; 3]) -> Mat3 {
+        let r = Mat3::from_quat(quat(q));
+        r * Mat3::from_diagonal(Vec3::from(s) * Vec3::from(s)) * r.transpose()
+    }
 
     #[test]
     fn rigid_motion_of_the_rod_moves_bound_gaussians_rigidly() {
@@ -177,46 +335,112 @@ mod tests {
         let t: Vec<f32> = (0..100).map(|g| (g as f32 * 0.37).fract()).collect();
         let offset: Vec<[f32; 3]> = (0..100).map(|g| [0.0, (g as f32).sin() * 0.02, (g as f32).cos() * 0.02]).collect();
         let rotation: Vec<[f32; 4]> = (0..100).map(|g| wxyz(Quat::from_rotation_y(g as f32 * 0.1))).collect();
-        let binding = Binding { segment: &segment, t: &t, offset: &offset, rotation: &rotation };
-        let (means, quats) = skin(&deformed, &rotations, &binding).unwrap();
+        let r = rows(100);
+        let binding = Binding { segment: &segment, t: &t, offset: &offset, rotation: &rotation, scale: &r.scale, weight: &r.weight };
+        let pose = Pose { rest: &rest, deformed: &deformed, rotation: &rotations };
+        let out = skin(&pose, &binding).unwrap();
         for g in 0..100 {
             let i = segment[g] as usize;
             let rest_centre = Vec3::from(rest[i]).lerp(Vec3::from(rest[i + 1]), t[g]) + Vec3::from(offset[g]);
-            assert!((Vec3::from(means[g]) - (motion * rest_centre + shift)).length() < 1e-5);
-            assert!(quat(quats[g]).angle_between(motion * quat(rotation[g])) < 1e-3);
+            assert!((Vec3::from(out.means[g]) - (motion * rest_centre + shift)).length() < 1e-5);
+            assert!(quat(out.quats[g]).angle_between(motion * quat(rotation[g])) < 1e-3);
+            assert_eq!(out.scales[g], r.scale[g]);
         }
     }
 
     #[test]
     fn at_rest_nothing_moves() {
         let rest = straight_rod(4);
-        let binding = Binding { segment: &[0, 2], t: &[0.0, 1.0], offset: &[[0.0, 0.01, 0.0], [0.0, 0.0, 0.02]], rotation: &[ID; 2] };
-        let (means, _) = skin(&rest, &[ID; 4], &binding).unwrap();
-        assert_eq!(means[0], [0.0, 0.01, 0.0]);
-        assert!((Vec3::from(means[1]) - Vec3::new(0.3, 0.0, 0.02)).length() < 1e-7);
+        let r = rows(2);
+        let binding = Binding {
+            segment: &[0, 2], t: &[0.0, 1.0], offset: &[[0.0, 0.01, 0.0], [0.0, 0.0, 0.02]], rotation: &[ID; 2],
+            scale: &r.scale, weight: &r.weight,
+        };
+        let out = skin(&Pose { rest: &rest, deformed: &rest, rotation: &[ID; 4] }, &binding).unwrap();
+        assert_eq!(out.means[0], [0.0, 0.01, 0.0]);
+        assert!((Vec3::from(out.means[1]) - Vec3::new(0.3, 0.0, 0.02)).length() < 1e-7);
     }
 
     #[test]
     fn a_shared_vertex_gives_both_segments_the_same_transform() {
         // bend at vertex 1: the end of segment 0 and the start of segment 1 must coincide
+        let rest = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
         let deformed = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
         let rotations = [ID, wxyz(Quat::from_rotation_z(0.785)), wxyz(Quat::from_rotation_z(1.571))];
         let offset = [[0.0, 0.0, 0.1], [0.0, 0.0, 0.1]];
-        let binding = Binding { segment: &[0, 1], t: &[1.0, 0.0], offset: &offset, rotation: &[ID; 2] };
-        let (means, quats) = skin(&deformed, &rotations, &binding).unwrap();
-        assert!((Vec3::from(means[0]) - Vec3::from(means[1])).length() < 1e-6);
-        assert!(quat(quats[0]).angle_between(quat(quats[1])) < 1e-6);
+        let r = rows(2);
+        let binding = Binding { segment: &[0, 1], t: &[1.0, 0.0], offset: &offset, rotation: &[ID; 2], scale: &r.scale, weight: &r.weight };
+        let out = skin(&Pose { rest: &rest, deformed: &deformed, rotation: &rotations }, &binding).unwrap();
+        assert!((Vec3::from(out.means[0]) - Vec3::from(out.means[1])).length() < 1e-6);
+        assert!(quat(out.quats[0]).angle_between(quat(out.quats[1])) < 1e-6);
+    }
+
+    #[test]
+    fn weight_moves_that_fraction_of_the_way() {
+        let rest = straight_rod(3);
+        let deformed: Vec<[f32; 3]> = rest.iter().map(|p| [p[0], p[1] + 1.0, p[2]]).collect();
+        let turn = wxyz(Quat::from_rotation_x(0.8));
+        let binding = Binding {
+            segment: &[1, 1, 1], t: &[0.5; 3], offset: &[[0.0, 0.0, 0.0]; 3], rotation: &[ID; 3],
+            scale: &[[0.01; 3]; 3], weight: &[0.0, 0.25, 1.0],
+        };
+        let out = skin(&Pose { rest: &rest, deformed: &deformed, rotation: &[turn; 3] }, &binding).unwrap();
+        assert_eq!(out.means[0], [0.15, 0.0, 0.0]);
+        assert!((out.means[1][1] - 0.25).abs() < 1e-6 && (out.means[2][1] - 1.0).abs() < 1e-6);
+        assert!(quat(out.quats[0]).angle_between(Quat::IDENTITY) < 1e-6);
+        assert!((quat(out.quats[1]).angle_between(Quat::IDENTITY) - 0.2).abs() < 0.02);
+    }
+
+    #[test]
+    fn stretch_scales_the_covariance_along_the_rest_direction() {
+        // Segment 0 stretched by 1.5 along x; a tilted, anisotropic Gaussian bound to it.
+        let rest = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        let deformed = [[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]];
+        let own = wxyz(Quat::from_euler(glam::EulerRot::XYZ, 0.4, 0.9, -0.3));
+        let scale = [0.03, 0.01, 0.004];
+        let binding = Binding { segment: &[0], t: &[0.5], offset: &[[0.0; 3]], rotation: &[own], scale: &[scale], weight: &[1.0] };
+        let out = skin(&Pose { rest: &rest, deformed: &deformed, rotation: &[ID; 2] }, &binding).unwrap();
+        let f = Mat3::from_diagonal(Vec3::new(1.5, 1.0, 1.0));
+        let want = f * covariance(own, scale) * f.transpose();
+        let got = covariance(out.quats[0], out.scales[0]);
+        let error = (0..3).map(|c| (got.col(c) - want.col(c)).abs().max_element()).fold(0.0, f32::max);
+        assert!(error < 1e-6 * 1e2 * want.col(0).x, "{got:?} vs {want:?}");
+        assert!((Vec3::from(out.means[0]) - Vec3::new(0.75, 0.0, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn jacobi_diagonalises_a_symmetric_matrix() {
+        // a strongly stretched, tilted Gaussian in its own axes: far from diagonal
+        let d = Vec3::new(0.6, -0.5, 0.62).normalize();
+        let s = Mat3::from_diagonal(Vec3::new(1.0, 0.3, 0.001));
+        let m = s + 0.3 * Mat3::from_cols(d * d.x, d * (d.y * 0.3), d * (d.z * 0.001));
+        let a = m * m.transpose();
+        let (v, values) = jacobi_eigen(a.as_dmat3());
+        let back = v * DMat3::from_diagonal(values.into()) * v.transpose();
+        for c in 0..3 {
+            assert!((back.col(c) - a.as_dmat3().col(c)).abs().max_element() < 1e-5);
+        }
+        assert!((v.determinant() - 1.0).abs() < 1e-5);
     }
 
     #[test]
     fn bad_input_is_an_error() {
-        let b = Binding { segment: &[3], t: &[0.5], offset: &[[0.0; 3]], rotation: &[ID] };
-        assert_eq!(skin(&straight_rod(3), &[ID; 3], &b).unwrap_err(), SkinError::SegmentOutOfRange { index: 0, segment: 3, segments: 2 });
-        assert!(matches!(skin(&straight_rod(3), &[ID; 2], &b), Err(SkinError::RotationCount { .. })));
-        assert!(matches!(skin(&straight_rod(1), &[ID; 1], &b), Err(SkinError::TooFewVertices(1))));
+        let r = rows(1);
+        let pose3 = |rest: &'static [[f32; 3]]| rest;
+        let rod = straight_rod(3);
+        let b = Binding { segment: &[3], t: &[0.5], offset: &[[0.0; 3]], rotation: &[ID], scale: &r.scale, weight: &r.weight };
+        let pose = Pose { rest: &rod, deformed: &rod, rotation: &[ID; 3] };
+        assert_eq!(skin(&pose, &b).unwrap_err(), SkinError::SegmentOutOfRange { index: 0, segment: 3, segments: 2 });
+        assert!(matches!(skin(&Pose { rotation: &[ID; 2], ..pose }, &b), Err(SkinError::RotationCount { .. })));
+        let one = pose3(&[[0.0; 3]]);
+        assert!(matches!(skin(&Pose { rest: one, deformed: one, rotation: &[ID] }, &b), Err(SkinError::TooFewVertices(1))));
         let mut bad = straight_rod(3);
         bad[1][0] = f32::NAN;
-        let ok = Binding { segment: &[0], t: &[0.5], offset: &[[0.0; 3]], rotation: &[ID] };
-        assert_eq!(skin(&bad, &[ID; 3], &ok).unwrap_err(), SkinError::NonFiniteVertex(1));
+        let ok = Binding { segment: &[0], t: &[0.5], offset: &[[0.0; 3]], rotation: &[ID], scale: &r.scale, weight: &r.weight };
+        assert_eq!(skin(&Pose { deformed: &bad, ..pose }, &ok).unwrap_err(), SkinError::NonFiniteVertex { which: "deformed", index: 1 });
+        let flat = [[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]];
+        assert_eq!(skin(&Pose { rest: &flat, ..pose }, &ok).unwrap_err(), SkinError::ZeroLengthSegment(0));
+        let short = Binding { weight: &[], ..ok };
+        assert!(matches!(skin(&pose, &short), Err(SkinError::BindingLengths { .. })));
     }
 }

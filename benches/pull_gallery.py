@@ -1,0 +1,76 @@
+"""Before/after pictures of real pulls (docs/deformation.md): for each pull of `realpulls.PULLS`
+(and any `--case NAME/VIEW` given), the view at rest, the same pull with one binding per
+Gaussian and nothing attached (how it was), and the pull now (needles split, attached parts,
+clamped ends eased), cropped around the rod, with the needle and tear fractions in the captions.
+
+    python benches/pull_gallery.py OUT_DIR [--case guitar_neck/az270 ...]
+
+Each pull is written to OUT_DIR/pull_<case>.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from sketchrodgs import render
+from sketchrodgs.images import save_png, to_uint8
+from sketchrodgs.realcases import load_cases
+from sketchrodgs.realpulls import PULLS, PullResult, pull_case
+
+CASES = Path(__file__).parent.parent / "tests" / "data" / "real_cases" / "cases.json"
+MARGIN_PX = 50
+WIDTH = 420  # of each panel
+
+
+def crop_box(result: PullResult, other: PullResult) -> tuple[int, int, int, int]:
+    camera = result.camera
+    points = np.concatenate([result.rest_axis, result.deformed_axis, other.deformed_axis])
+    uv, _ = camera.project(points)
+    low, high = np.nanmin(uv, axis=0) - MARGIN_PX, np.nanmax(uv, axis=0) + MARGIN_PX
+    return (max(0, int(low[0])), max(0, int(low[1])), min(camera.width, int(high[0])), min(camera.height, int(high[1])))
+
+
+def panel(scene, result: PullResult, box, caption: str) -> Image.Image:
+    image = Image.fromarray(to_uint8(render(scene, result.camera).rgb)).crop(box)
+    image = image.resize((WIDTH, max(1, round(image.height * WIDTH / image.width))), Image.LANCZOS)
+    out = Image.new("RGB", (image.width, image.height + 22), "white")
+    out.paste(image, (0, 22))
+    ImageDraw.Draw(out).text((4, 5), caption, fill=(0, 0, 0))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--case", action="append", default=[], help="NAME/VIEW (default: the tested pulls)")
+    args = parser.parse_args()
+    pulls = [tuple(c.split("/")) for c in args.case] or list(PULLS)
+    scenes, cases = load_cases(CASES)
+    args.out.mkdir(parents=True, exist_ok=True)
+    for name, view in pulls:
+        case = next(c for c in cases if c["name"] == name)
+        scene = scenes[case["scene"]]
+        old = pull_case(scene, case, view, extract={"attach": False}, subdivide=False, end_ramp=0.0)
+        new = pull_case(scene, case, view)
+        box = crop_box(new, old)
+        panels = [panel(new.rest, new, box, f"{name} at rest"),
+                  panel(old.deformed, old, box, f"before: needles {old.needles:.1%}, tears {old.tears:.1%}"),
+                  panel(new.deformed, new, box, f"now: needles {new.needles:.1%}, tears {new.tears:.1%}")]
+        sheet = Image.new("RGB", (sum(p.width for p in panels) + 8 * (len(panels) - 1), max(p.height for p in panels)),
+                          "white")
+        x = 0
+        for p in panels:
+            sheet.paste(p, (x, 0))
+            x += p.width + 8
+        path = args.out / f"pull_{name}.png"
+        save_png(path, np.asarray(sheet))
+        print(f"{path}: before needles {old.needles:.2%} tears {old.tears:.2%}; now needles {new.needles:.2%} "
+              f"tears {new.tears:.2%}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,153 @@
+"""How cleanly a deformed scene follows its rods (issue: pulled real objects deform cleanly):
+needles that stick out of a bend, and neighbours that tear apart, both comparing a scene at rest
+with the same scene deformed, row for row, in units of the rod's radius R; and a ground truth,
+a synthetic tube bent into an arc by the exact continuum map, rendered against our skinning.
+
+Used by `tests/test_deform.py` (asserted) and `benches/bench_skin.py` (printed).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from . import synthetic
+from .camera import Camera
+from .extract import extract_rod
+from .render import render
+from .rod import Rod
+from .scene import GaussianScene
+from .skin import Rig
+
+MOVED = 0.05  # a Gaussian "moved" when its centre moved more than this many R
+NEEDLE = 0.5  # a tip sticking out by more than this many R is a needle
+TEAR_PAIR = 0.25  # neighbours at rest: centres within this many R
+TEAR = 0.5  # a pair tears when their displacements differ by more than this many R
+
+
+def _moved(rest: GaussianScene, deformed: GaussianScene, radius: float) -> np.ndarray:
+    return np.linalg.norm(deformed.means.astype(np.float64) - rest.means, axis=1) > MOVED * radius
+
+
+def _major_tips(scene: GaussianScene, rows: np.ndarray) -> np.ndarray:
+    """(2, G, 3) the 3-sigma tips of the rows' Gaussians along their longest axis."""
+    scales = scene.scales[rows].astype(np.float64)
+    major = np.argmax(scales, axis=1)
+    axes = Rotation.from_quat(scene.quats[rows][:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
+    direction = axes[np.arange(len(rows)), :, major] * (3 * scales[np.arange(len(rows)), major])[:, None]
+    centre = scene.means[rows].astype(np.float64)
+    return np.stack([centre + direction, centre - direction])
+
+
+def _distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """Distance from each point to the nearest point of a polyline (dense resampling, exact enough
+    at the R/8 spacing used here)."""
+    polyline = np.asarray(polyline, np.float64)
+    steps = np.linalg.norm(np.diff(polyline, axis=0), axis=1)
+    length = steps.sum()
+    spacing = max(length / 4000, 1e-12)
+    dense = [polyline[:1]]
+    for a, b, step in zip(polyline[:-1], polyline[1:], steps):
+        count = max(1, int(np.ceil(step / spacing)))
+        dense.append(a + np.linspace(0, 1, count + 1)[1:, None] * (b - a))
+    return cKDTree(np.concatenate(dense)).query(points)[0]
+
+
+def needle_fraction(rest: GaussianScene, deformed: GaussianScene, rest_axes: list[np.ndarray],
+                    deformed_axes: list[np.ndarray], radius: float, rows: np.ndarray | None = None) -> float:
+    """Among the Gaussians that moved more than 0.05 R, the opacity-weighted fraction whose 3-sigma
+    tips along their major axis end up further from the deformed axes than they were from the
+    rest axes, by more than 0.5 R.
+
+    Args:
+        rest, deformed: the same scene (same rows) at rest and deformed.
+        rest_axes, deformed_axes: each rod's polyline at rest and now, in the same order.
+        radius: R, the unit.
+        rows: only these rows count (default: all). Attached parts (a leaf riding rigidly on its
+            stem) are left out by the callers here: they are meant to keep their shape, not to
+            follow the axis, so their tips do move away from a bent axis.
+    """
+    moved = _moved(rest, deformed, radius)
+    if rows is not None:
+        keep = np.zeros(len(moved), bool)
+        keep[rows] = True
+        moved &= keep
+    rows = np.flatnonzero(moved)
+    if len(rows) == 0:
+        return 0.0
+    before = _major_tips(rest, rows)
+    after = _major_tips(deformed, rows)
+    out = np.zeros(len(rows), bool)
+    for tip in range(2):
+        d_rest = np.min([_distance_to_polyline(before[tip], axis) for axis in rest_axes], axis=0)
+        d_now = np.min([_distance_to_polyline(after[tip], axis) for axis in deformed_axes], axis=0)
+        out |= d_now - d_rest > NEEDLE * radius
+    weight = rest.opacities[rows].astype(np.float64)
+    return float(weight[out].sum() / max(weight.sum(), 1e-300))
+
+
+def tear_fraction(rest: GaussianScene, deformed: GaussianScene, radius: float) -> float:
+    """Among pairs of Gaussians within 0.25 R of each other at rest, with at least one moved more
+    than 0.05 R, the fraction whose displacements differ by more than 0.5 R."""
+    moved = _moved(rest, deformed, radius)
+    if not moved.any():
+        return 0.0
+    displacement = deformed.means.astype(np.float64) - rest.means
+    # only pairs near something that moved can count: search around the moved rows
+    near = np.flatnonzero(moved)
+    tree = cKDTree(rest.means.astype(np.float64))
+    partners = tree.query_ball_point(rest.means[near].astype(np.float64), TEAR_PAIR * radius)
+    first = np.repeat(near, [len(p) for p in partners])
+    second = np.concatenate([np.asarray(p, np.int64) for p in partners]) if len(partners) else np.zeros(0, np.int64)
+    # each unordered pair once: keep (i, j) with i < j, or with j not moved (seen only from i)
+    keep = (first != second) & ((first < second) | ~moved[second])
+    first, second = first[keep], second[keep]
+    if len(first) == 0:
+        return 0.0
+    torn = np.linalg.norm(displacement[first] - displacement[second], axis=1) > TEAR * radius
+    return float(torn.mean())
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two images in [0, 1]."""
+    error = np.mean((np.clip(a, 0, 1) - np.clip(b, 0, 1)) ** 2)
+    return float(10 * np.log10(1.0 / max(error, 1e-20)))
+
+
+def arc_bend(angle: float = np.pi / 2, seed: int = 3, subdivide: bool = True) -> dict[str, float]:
+    """Bend a synthetic tube (R = 0.01, 1 long, along x) into an arc of `angle` two ways and
+    compare their renders at 960x540: by the exact continuum map (`synthetic.bend_into_arc`,
+    every Gaussian moved and its covariance carried by the map's Jacobian), and by our pipeline
+    (extract the rod from a stroke, clamp its start where the map fixes it, put its vertices on
+    the arc, skin).
+
+    Returns: psnr (dB), gaussians (bound, after splitting), vertices.
+    """
+    tubes = synthetic.tube_scene([synthetic.straight], radius=0.01, clutter=0, seed=seed)
+    scene = tubes.scene.replace(means=tubes.scene.means - np.float32([0.0, 0.05, 0.0]))  # axis on y = 0
+    straight_view = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, -1, 0), width=960, height=540, fov_y_deg=40)
+    uv, _ = straight_view.project(tubes.axes[0] - [0.0, 0.05, 0.0])
+    extraction = extract_rod(scene, straight_view, uv[np.r_[0:len(uv):40, len(uv) - 1]], radius=0.01)
+    polyline = extraction.polyline.astype(np.float64)
+    start, end = float(polyline[0, 0]), float(polyline[-1, 0])
+    # the map's band is the rod's extent; what lies past the rod's ends is left out of both
+    inside = (scene.means[:, 0] >= start - 0.01) & (scene.means[:, 0] <= end + 0.01)
+    scene = scene.subset(np.flatnonzero(inside))
+    extraction = extract_rod(scene, straight_view, uv[np.r_[0:len(uv):40, len(uv) - 1]], radius=0.01)
+    polyline = extraction.polyline.astype(np.float64)
+    start, length = float(polyline[0, 0]), float(polyline[-1, 0] - polyline[0, 0])
+
+    rod = Rod(polyline, radius=extraction.radius)
+    rod.clamp(0)
+    rig = Rig.build(scene, [extraction], [rod], subdivide=subdivide)
+    rod.set_positions(synthetic.bend_into_arc(polyline, start, length, angle)[0])
+    ours = rig.skinned([rod])
+    exact = synthetic.deform_exactly(scene, *synthetic.bend_into_arc(scene.means, start, length, angle))
+
+    arc = synthetic.bend_into_arc(polyline, start, length, angle)[0]
+    centre = 0.5 * (arc.min(axis=0) + arc.max(axis=0))
+    camera = Camera.look_at(centre + [0.0, 0.0, -1.6 * float(np.ptp(arc, axis=0).max())], centre, up=(0, -1, 0),
+                            width=960, height=540, fov_y_deg=40)
+    return {"psnr": psnr(render(exact, camera).rgb, render(ours, camera).rgb),
+            "gaussians": float(len(rig.bound[0].gaussian_ids)), "vertices": float(rod.num_vertices)}

@@ -1,0 +1,114 @@
+"""How cleanly pulled objects deform (docs/deformation.md): the needle and tear fractions measure
+what they say, real pulls of the guitar neck, a tree branch and a plant stem meet the targets (or
+are marked where they do not yet), and our skinning matches the exact bend of a tube into an arc."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sketchrodgs import deform_metrics as dm
+from sketchrodgs.realcases import load_cases
+from sketchrodgs.realpulls import PULLS, pull_case
+from sketchrodgs.scene import GaussianScene
+
+CASES = Path(__file__).parent / "data" / "real_cases" / "cases.json"
+R = 0.01
+AXIS = np.stack([np.linspace(0, 1, 101), np.zeros(101), np.zeros(101)], axis=1)
+
+
+def scene_of(means, scales, quats=None) -> GaussianScene:
+    n = len(means)
+    quats = np.tile([1.0, 0, 0, 0], (n, 1)) if quats is None else quats
+    return GaussianScene.from_colors(np.asarray(means, float), np.asarray(scales, float), quats, np.full(n, 0.5),
+                                     np.full((n, 3), 0.5))
+
+
+def test_a_needle_sticking_out_of_a_bend_counts_and_a_rigid_move_does_not():
+    # two Gaussians on the axis, 4 R long along it; the axis bends up by 90 degrees at x = 0.5
+    rest = scene_of([[0.5, 0, 0], [0.2, 0, 0]], [[4 * R, 0.1 * R, 0.1 * R]] * 2)
+    bent_axis = np.concatenate([AXIS[:51], np.stack([np.full(50, 0.5), AXIS[51:, 0] - 0.5, np.zeros(50)], axis=1)])
+    # the first keeps pointing along x at the corner (its tip now 4 R off the new axis), and moves a bit
+    stuck = scene_of([[0.5, 0.001, 0], [0.2, 0, 0]], [[4 * R, 0.1 * R, 0.1 * R]] * 2)
+    assert dm.needle_fraction(rest, stuck, [AXIS], [bent_axis], R) == 1.0  # only the moved one counts
+    # everything moved rigidly with the axis: no needle
+    shift = np.array([0.0, 0.3, 0.0])
+    moved = scene_of(rest.means + shift, rest.scales)
+    assert dm.needle_fraction(rest, moved, [AXIS], [AXIS + shift], R) == 0.0
+    # rows left out are not counted
+    assert dm.needle_fraction(rest, stuck, [AXIS], [bent_axis], R, rows=np.array([1])) == 0.0
+
+
+def test_neighbours_moving_apart_tear():
+    rest = scene_of([[0.5, 0, 0], [0.5 + 0.1 * R, 0, 0], [0.9, 0, 0]], [[0.1 * R] * 3] * 3)
+    together = scene_of(rest.means + [0, 2 * R, 0], rest.scales)
+    assert dm.tear_fraction(rest, together, R) == 0.0
+    apart = scene_of(rest.means + [[0, 2 * R, 0], [0, 0, 0], [0, 0, 0]], rest.scales)
+    assert dm.tear_fraction(rest, apart, R) == 1.0  # the one close pair, one of them moved 2 R
+    assert dm.tear_fraction(rest, rest, R) == 0.0
+
+
+@pytest.mark.parametrize("degrees", [90, 180])
+def test_skinning_matches_the_exact_bend_of_a_tube_into_an_arc(degrees):
+    result = dm.arc_bend(np.radians(degrees))
+    assert result["psnr"] >= 35.0, result
+
+
+@pytest.fixture(scope="module")
+def pulls():
+    scenes, cases = load_cases(CASES)
+    out = {}
+    for name, view in PULLS:
+        case = next(c for c in cases if c["name"] == name)
+        out[name] = (pull_case(scenes[case["scene"]], case, view),
+                     pull_case(scenes[case["scene"]], case, view, extract={"attach": False}, subdivide=False,
+                               end_ramp=0.0))
+    return out
+
+
+# Measured misses (docs/deformation.md, "Where it still falls short").
+TEAR_MISSES = {"tree_branch_centre": "the branch crosses another and carries a piece of it (0.42 %)",
+               "plant_side_stem_left": "leaves of the main stem touch it near its base (0.46 %)"}
+
+
+@pytest.mark.parametrize("name", [name for name, _ in PULLS])
+def test_pulls_leave_no_needles(pulls, name):
+    now, before = pulls[name]
+    assert now.needles <= 0.005, now.needles
+    assert now.needles <= before.needles
+
+
+@pytest.mark.parametrize("name", [
+    pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=TEAR_MISSES[name])) if name in TEAR_MISSES else name
+    for name, _ in PULLS])
+def test_pulls_do_not_tear(pulls, name):
+    now, _ = pulls[name]
+    assert now.tears <= 0.003, now.tears
+
+
+@pytest.mark.parametrize("name", [name for name, _ in PULLS])
+def test_pulls_tear_less_than_one_binding_per_gaussian_did(pulls, name):
+    now, before = pulls[name]
+    assert now.tears <= before.tears + 1e-4, (now.tears, before.tears)
+
+
+def test_the_guitar_neck_takes_its_headstock_and_leaves_the_body(pulls):
+    now, _ = pulls["guitar_neck"]
+    attached = now.extraction.binding.attached
+    assert attached.sum() > 3000  # headstock and tuning pegs
+    scene = now.rest
+    ids = now.extraction.binding.gaussian_ids
+    # the body is below the neck's lower (clamped) end in this view: what lies below the end cap
+    # (R, 19 px, past the end) stays
+    uv, _ = now.camera.project(scene.means[ids].astype(np.float64))
+    end_uv, _ = now.camera.project(now.rest_axis[[0, -1]].astype(np.float64))
+    below = uv[:, 1] > max(end_uv[:, 1]) + 20
+    assert below.sum() < 0.002 * len(ids), below.sum()
+
+
+def test_the_plant_stem_takes_its_leaves(pulls):
+    now, _ = pulls["plant_side_stem_left"]
+    binding = now.extraction.binding
+    assert binding.attached.sum() > (~binding.attached).sum()  # its leaves outweigh the stem

@@ -1,0 +1,134 @@
+"""Segmentation (docs/deformation.md, "Segmentation"): the part's whole cross-section, not what lies
+across a gap; small attached parts ride with the rod, large bodies stay; the rod file keeps it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sketchrodgs import Camera, extract_rod, synthetic
+from sketchrodgs.extract import Extraction
+from sketchrodgs.rod import Rod
+from sketchrodgs.scene import GaussianScene
+from sketchrodgs.segment import segment_and_bind
+from sketchrodgs.skin import BoundRod, skin
+
+R = 0.01
+AXIS = np.stack([np.linspace(-0.45, 0.45, 91), np.full(91, 0.05), np.zeros(91)], axis=1)
+
+
+def blobs(centres: np.ndarray, size: float = 0.002) -> dict[str, np.ndarray]:
+    n = len(centres)
+    return {"means": centres, "scales": np.full((n, 3), size), "quats": np.tile([1.0, 0, 0, 0], (n, 1)),
+            "opacities": np.full(n, 0.8), "colors": np.full((n, 3), 0.5)}
+
+
+def grid(low, high, step: float) -> np.ndarray:
+    axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(low, high)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def with_extras(**extras: np.ndarray) -> tuple[GaussianScene, dict[str, slice]]:
+    """The synthetic straight tube (R = 0.01, axis AXIS) plus the given extra point sets."""
+    tube = synthetic.tube_scene([synthetic.straight], radius=R, clutter=0, seed=2).scene
+    parts = [{"means": tube.means, "scales": tube.scales, "quats": tube.quats, "opacities": tube.opacities,
+              "colors": tube.colors}]
+    rows, start = {}, len(tube)
+    for name, points in extras.items():
+        parts.append(blobs(points))
+        rows[name] = slice(start, start + len(points))
+        start += len(points)
+    merged = {k: np.concatenate([np.asarray(p[k], np.float64) for p in parts]) for k in parts[0]}
+    scene = GaussianScene.from_colors(merged["means"], merged["scales"], merged["quats"], merged["opacities"],
+                                      merged["colors"])
+    return scene, rows
+
+
+def test_a_fin_on_the_part_goes_with_it_but_a_neighbour_across_a_gap_stays():
+    # a fin along the tube from its surface out to 2.2 R (the part's cross-section is not round),
+    # and a rail 2 R from the axis on the other side, separated from the surface by a 0.8 R gap
+    fin = grid((-0.3, 0.05 + R, -0.001), (0.3, 0.05 + 2.2 * R, 0.001), 0.002)
+    rail = grid((-0.3, 0.05 - 2.0 * R, -0.001), (0.3, 0.05 - 1.9 * R, 0.001), 0.002)
+    scene, rows = with_extras(fin=fin, rail=rail)
+    binding = segment_and_bind(AXIS, scene, R)
+    bound = np.zeros(len(scene), bool)
+    bound[binding.gaussian_ids] = True
+    assert bound[rows["fin"]].mean() > 0.99
+    assert not bound[rows["rail"]].any()
+    assert bound[: rows["fin"].start].mean() > 0.95  # the tube itself
+    assert not binding.attached[np.isin(binding.gaussian_ids, np.arange(len(scene))[rows["fin"]])].any()
+
+
+def leaf_on_a_petiole(at_x: float) -> np.ndarray:
+    """A petiole from the tube's surface up to 5 R, then a leaf blade 6 R across."""
+    petiole = grid((at_x - 0.001, 0.05 + 0.8 * R, -0.001), (at_x + 0.001, 0.05 + 5 * R, 0.001), 0.0015)
+    blade = grid((at_x - 3 * R, 0.05 + 5 * R, -0.001), (at_x + 3 * R, 0.05 + 8 * R, 0.001), 0.002)
+    return np.concatenate([petiole, blade])
+
+
+def test_a_small_attached_part_rides_rigidly_and_a_large_body_stays():
+    leaf = leaf_on_a_petiole(0.1)
+    # a body as long as the rod, joined to the tube's underside all along
+    body = grid((-0.45, 0.05 - 12 * R, -0.001), (0.45, 0.05 - 0.9 * R, 0.001), 0.003)
+    scene, rows = with_extras(leaf=leaf, body=body)
+    binding = segment_and_bind(AXIS, scene, R)
+    ids = np.arange(len(scene))
+    is_leaf = np.isin(binding.gaussian_ids, ids[rows["leaf"]])
+    assert is_leaf.sum() == len(leaf)  # all of it follows: the petiole's foot in the part, the rest attached
+    beyond = binding.distance[is_leaf] > 2.6 * R
+    assert binding.attached[is_leaf][beyond].all() and beyond.mean() > 0.9
+    assert np.isin(ids[rows["body"]], binding.gaussian_ids).mean() < 0.2  # only its strip along the tube
+    # the leaf keeps its shape (one rigid motion) when the rod bends
+    rod = Rod(AXIS, radius=R)
+    rest = rod.positions.copy()
+    bend = np.stack([rest[:, 0], rest[:, 1] + 2.0 * rest[:, 0] ** 2, rest[:, 2]], axis=1)
+    moved = skin(scene, BoundRod.from_binding(scene, binding, rod), _teleported(rod, bend))
+    rigid = binding.gaussian_ids[is_leaf & binding.attached]
+    leaf_rest, leaf_now = scene.means[rigid].astype(np.float64), moved.means[rigid].astype(np.float64)
+    pairs = np.random.default_rng(0).integers(0, len(rigid), (500, 2))
+    before = np.linalg.norm(leaf_rest[pairs[:, 0]] - leaf_rest[pairs[:, 1]], axis=1)
+    after = np.linalg.norm(leaf_now[pairs[:, 0]] - leaf_now[pairs[:, 1]], axis=1)
+    assert np.abs(after - before).max() < 1e-5
+    assert np.linalg.norm(leaf_now - leaf_rest, axis=1).min() > 0.01  # and it did move
+
+
+def _teleported(rod: Rod, positions: np.ndarray) -> Rod:
+    rod.set_positions(positions)
+    return rod
+
+
+def test_attaching_can_be_turned_off_and_the_size_limit_holds():
+    scene, rows = with_extras(leaf=leaf_on_a_petiole(0.1))
+    leaf_rows = np.arange(len(scene))[rows["leaf"]]
+    off = segment_and_bind(AXIS, scene, R, attach=False)
+    assert not off.attached.any()
+    assert np.isin(leaf_rows, off.gaussian_ids).mean() < 0.2  # only the petiole's foot, in the part
+    small = segment_and_bind(AXIS, scene, R, attach_size=4 * R)  # the leaf reaches 8.5 R from its joint
+    assert not small.attached.any()
+
+
+def test_a_part_touching_the_rod_near_its_end_from_the_side_is_not_attached():
+    # a leaf joined at the rod's last 2 R, lying beside the rod: it belongs to what the end joins
+    scene, rows = with_extras(leaf=leaf_on_a_petiole(0.44))
+    binding = segment_and_bind(AXIS, scene, R)
+    assert not np.isin(np.arange(len(scene))[rows["leaf"]], binding.gaussian_ids[binding.attached]).any()
+
+
+def test_the_rod_file_keeps_which_gaussians_are_attached(tmp_path):
+    scene, _ = with_extras(leaf=leaf_on_a_petiole(0.1))
+    camera = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, -1, 0), width=960, height=540, fov_y_deg=40)
+    uv, _ = camera.project(AXIS)
+    extraction = extract_rod(scene, camera, uv, radius=R)
+    assert extraction.binding.attached.sum() > 100
+    extraction.save(tmp_path / "rod.json")
+    again = Extraction.from_json(json.loads((tmp_path / "rod.json").read_text()), "rod.json")
+    np.testing.assert_array_equal(again.binding.attached, extraction.binding.attached)
+    # a rod file from before attached parts reads as "nothing attached"
+    data = json.loads((tmp_path / "rod.json").read_text())
+    del data["binding"]["attached"]
+    assert not Extraction.from_json(data, "old.json").binding.attached.any()
+    data["binding"]["attached"] = [1]
+    with pytest.raises(Exception, match="binding.attached"):
+        Extraction.from_json(data, "bad.json")

@@ -1,0 +1,122 @@
+"""Subdivision of needles before skinning (docs/deformation.md, "Subdivision"): the pieces
+composite to the parent, the scene renders the same at rest, and rows map back to the input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sketchrodgs import Camera, data, extract_rod, load_scene, render
+from sketchrodgs import subdivide as sd
+from sketchrodgs.deform_metrics import psnr
+from sketchrodgs.realcases import load_cases
+from sketchrodgs.rod import Rod
+from sketchrodgs.scene import GaussianScene
+from sketchrodgs.skin import Rig
+
+CASES = Path(__file__).parent / "data" / "real_cases" / "cases.json"
+
+
+@pytest.mark.parametrize("k", [2, 3, 5, 8, 16])
+def test_the_shipped_piece_tables_composite_to_the_parent(k):
+    spacing, std, opacity = sd.piece_table(k)
+    target = np.exp(-0.5 * sd._ALONG**2)[None] * sd._ACROSS[:, None]
+    for o, d, s, pieces in zip(sd._OPACITY_GRID, spacing, std, opacity):
+        error = sd._composite(d, s, pieces) - o * target
+        assert np.sqrt(np.mean(error**2)) < 0.042 * o, (k, o)  # compositing error grows with opacity
+        assert s <= sd.PIECE_STD / k + 1e-9  # each piece stays short
+        assert np.allclose(pieces, pieces[::-1], atol=1e-6)  # symmetric about the parent's centre
+
+
+def test_the_shipped_table_is_what_the_fit_gives():
+    for k in (2, 7):
+        fitted, shipped = sd.fit_piece_table(k), sd.piece_table(k)
+        for a, b in zip(fitted, shipped):
+            np.testing.assert_allclose(a, b, atol=2e-3)
+
+
+def needle_scene() -> GaussianScene:
+    rng = np.random.default_rng(4)
+    n = 50
+    quats = rng.normal(size=(n, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    scales = np.stack([rng.uniform(0.02, 0.08, n), rng.uniform(0.001, 0.004, n), rng.uniform(0.001, 0.004, n)], axis=1)
+    return GaussianScene.from_colors(rng.normal(scale=0.1, size=(n, 3)), scales, quats, rng.uniform(0.1, 1.0, n),
+                                     rng.uniform(0.2, 0.9, (n, 3)))
+
+
+def test_split_keeps_the_rows_and_maps_the_pieces_back():
+    scene = needle_scene()
+    rows = np.array([3, 10, 11, 40])
+    counts = np.array([2, 4, 1, 16])
+    new, source, pieces = sd.split(scene, rows, counts)
+    assert len(new) == len(scene) + (2 - 1) + (4 - 1) + (16 - 1)
+    np.testing.assert_array_equal(source[: len(scene)], np.arange(len(scene)))
+    assert sorted(np.bincount(source[len(scene):], minlength=len(scene))[[3, 10, 11, 40]]) == [0, 1, 3, 15]
+    assert set(pieces) == set(np.flatnonzero(np.isin(source, [3, 10, 40])))
+    untouched = np.setdiff1d(np.arange(len(scene)), [3, 10, 40])
+    for field in ("means", "scales", "quats", "opacities", "sh"):
+        np.testing.assert_array_equal(getattr(new, field)[untouched], getattr(scene, field)[untouched])
+    for parent in (3, 10, 40):
+        mine = np.flatnonzero(source == parent)
+        np.testing.assert_array_equal(new.quats[mine], np.repeat(scene.quats[[parent]], len(mine), axis=0))
+        np.testing.assert_array_equal(new.sh[mine], np.repeat(scene.sh[[parent]], len(mine), axis=0))
+        major = int(np.argmax(scene.scales[parent]))
+        assert np.all(new.scales[mine, major] < scene.scales[parent, major])
+        minor = [i for i in range(3) if i != major]
+        np.testing.assert_array_equal(new.scales[mine][:, minor], np.repeat(scene.scales[[parent]][:, minor], len(mine), 0))
+        # the pieces' centres lie on the parent's major axis, symmetric about its centre
+        np.testing.assert_allclose(new.means[mine].mean(axis=0), scene.means[parent], atol=1e-6)
+
+
+def test_only_needles_along_the_rod_are_split():
+    scene = GaussianScene.from_colors(np.zeros((3, 3)), np.array([[0.05, 0.002, 0.002]] * 3),
+                                      np.array([[1.0, 0, 0, 0]] * 3), np.full(3, 0.8), np.full((3, 3), 0.5))
+    along = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.sqrt(0.5), np.sqrt(0.5), 0.0]])
+    counts = sd.piece_counts(scene, np.arange(3), along, edge_length=0.031)
+    assert counts[0] == 10  # 3-sigma length 0.3 over edges of 0.031
+    assert counts[1] == 1  # across the rod: splitting along its length would not shorten it along the rod
+    assert 2 <= counts[2] < counts[0]
+
+
+def rest_psnr(scene: GaussianScene, extraction, cameras) -> tuple[int, list[float]]:
+    rig = Rig.build(scene, [extraction], [Rod(extraction.polyline, radius=extraction.radius)])
+    return len(rig.scene) - len(scene), [psnr(render(scene, c).rgb, render(rig.scene, c).rgb) for c in cameras]
+
+
+def test_the_plant_renders_the_same_at_rest_after_splitting():
+    scene = load_scene(data.sample("plant"))
+    camera = data.sample_camera("plant")
+    extraction = extract_rod(scene, camera, data.sample_stroke("plant"))
+    _, cases = load_cases(CASES)
+    views = next(c for c in cases if c["name"] == "plant_main_stem")["views"]
+    added, values = rest_psnr(scene, extraction, [camera] + [Camera.from_dict(v["camera"]) for v in views])
+    assert added > 500
+    assert min(values) >= 45.0, values
+
+
+@pytest.fixture(scope="module")
+def guitar_neck():
+    scenes, cases = load_cases(CASES)
+    case = next(c for c in cases if c["name"] == "guitar_neck")
+    view = next(v for v in case["views"] if v["name"] == "az270")
+    extraction = extract_rod(scenes["guitar"], Camera.from_dict(view["camera"]), np.asarray(view["stroke"]),
+                             radius=case["radius"])
+    return scenes["guitar"], extraction, {v["name"]: Camera.from_dict(v["camera"]) for v in case["views"]}
+
+
+def test_the_guitar_neck_renders_the_same_at_rest_seen_from_the_side(guitar_neck):
+    scene, extraction, cameras = guitar_neck
+    added, values = rest_psnr(scene, extraction, [cameras["az240"]])
+    assert added > 10_000  # its strings and fretboard are needles
+    assert values[0] >= 45.0, values
+
+
+@pytest.mark.xfail(strict=True, reason="seen obliquely, a string split in pieces sorts with the fretboard piece by "
+                   "piece, the unsplit string by its centre only (docs/deformation.md): 40-41 dB")
+def test_the_guitar_neck_renders_the_same_at_rest_seen_obliquely(guitar_neck):
+    scene, extraction, cameras = guitar_neck
+    _, values = rest_psnr(scene, extraction, [cameras["az270"], cameras["az320"]])
+    assert min(values) >= 45.0, values
