@@ -126,6 +126,9 @@ def linked_components(points: npt.NDArray[np.float32], group: npt.NDArray[np.uin
 def linked_to(
     points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], source: int, target: int, link: float
 ) -> npt.NDArray[np.int64]: ...
+def grow_part(
+    points: npt.NDArray[np.float32], kind: npt.NDArray[np.uint8], spacings: float, link_min: float, link_max: float
+) -> tuple[float, npt.NDArray[np.bool_], bool]: ...
 def skin_scatter(
     rest: npt.NDArray[np.float32],
     deformed: npt.NDArray[np.float32],

@@ -99,17 +99,17 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
     segment, t, distance = _core.nearest_on_polyline(_f32(polyline), _f32(means[rows]), near_reach)
     near = segment >= 0
     rows, segment, t, distance = rows[near], segment[near], t[near], distance[near]
-    link = _link_distance(means[rows[distance <= radius]], radius)
     points = _f32(means[rows])
     # The rod's extent: a centre past an end vertex is the part's within R of it (the end cap);
     # what continues past that is not.
     at_end = _past_an_end(segment, t, len(polyline))
     eligible = (distance <= part_reach) & (~at_end | (distance <= radius))
-    part = _grow(points, link, eligible, seeds=eligible & (distance <= radius))
+    kind = np.where(eligible & (distance <= radius), 0, np.where(eligible, 1, 2)).astype(np.uint8)
+    link, part, touched = _core.grow_part(points, kind, LINK_SPACINGS, LINK_MIN * radius, LINK_MAX * radius)
+    link = float(link)
     home = np.where(part, np.arange(len(rows)), -1)  # whose (segment, t) each row takes
     attached = np.zeros(len(rows), bool)
-    touched = attach and bool((_core.linked_to(points, np.where(part, 1, 0).astype(np.uint8), 0, 1, link) >= 0).any())
-    if touched:
+    if attach and touched:
         # Attached parts: what a part can reach from where it joins, plus two links (a larger body
         # shows itself by coming within a link of the edge). Distances to a densely sampled axis
         # are exact enough out there.
@@ -168,28 +168,6 @@ def _distances(polyline: np.ndarray, points: np.ndarray, reach: float, radius: f
     for which, k, inward in ((0, 0, polyline[1] - polyline[0]), (1, len(samples) - 1, polyline[-2] - polyline[-1])):
         past[(index == k) & ((points - samples[k]) @ inward < 0)] = which
     return distance, past
-
-
-def _link_distance(core: np.ndarray, radius: float) -> float:
-    """Neighbour distance from the part's own spacing (see LINK_SPACINGS); `core` are the centres
-    within R of the axis."""
-    if len(core) < 5:
-        return LINK_MAX * radius
-    core = core.astype(np.float64)
-    probes = core[:: max(1, len(core) // 2000)]  # a median needs a couple of thousand, not all
-    tree = cKDTree(core, balanced_tree=False, compact_nodes=False)  # built once, queried a little
-    spacing = float(np.median(tree.query(probes, k=5)[0][:, 4]))
-    return float(np.clip(LINK_SPACINGS * spacing, LINK_MIN * radius, LINK_MAX * radius))
-
-
-def _grow(points: np.ndarray, link: float, eligible: np.ndarray, seeds: np.ndarray) -> np.ndarray:
-    """The eligible points linked to a seed through eligible points: the seeds, and the components
-    of the other eligible points that touch a seed (cheaper than linking all of them)."""
-    shell = eligible & ~seeds
-    group = np.where(seeds, 1, np.where(shell, 0, 255)).astype(np.uint8)
-    touching = _core.linked_to(points, group, 0, 1, link) >= 0
-    labels = _core.linked_components(points, np.where(shell, 0, 255).astype(np.uint8), link)
-    return seeds | (shell & np.isin(labels, np.unique(labels[shell & touching])))
 
 
 def _attached_parts(points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float,

@@ -2,8 +2,9 @@
 //! apart, and a gap wider than that separates parts. Segmentation (docs/deformation.md) grows the
 //! part over these links and finds the small parts attached to it.
 //!
-//! Points fall in a uniform grid of `link`-wide cells (see `Cells`). Points are linked only within their group (a `u8`);
-//! `EXCLUDED` points have no links. The answers do not depend on the order of work.
+//! Points fall in a uniform grid of `link`-wide cells (see `Cells`). Points are linked only within
+//! their group (a `u8`); `EXCLUDED` points have no links. The answers do not depend on the order
+//! of work.
 //!
 //! ```
 //! use sketchrodgs_polyline::proximity::{linked_components, linked_to, EXCLUDED};
@@ -15,9 +16,9 @@
 //! ```
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use rayon::prelude::*;
-use std::hash::{BuildHasherDefault, Hasher};
 
 /// Points of this group are linked to nothing.
 pub const EXCLUDED: u8 = u8::MAX;
@@ -78,8 +79,10 @@ struct Cells {
     /// The points in sorted order, and the input index of each.
     sorted: Vec<[f32; 3]>,
     index: Vec<u32>,
-    /// The cell of each sorted point.
+    /// The cell and group of each sorted point.
     cell: Vec<[i64; 3]>,
+    group: Vec<u8>,
+    /// Each (cell, group)'s range of sorted points.
     ranges: HashMap<Key, (u32, u32), BuildHasherDefault<KeyHasher>>,
 }
 
@@ -104,22 +107,22 @@ impl Cells {
         // the keys computed once (sorting by a computed key would floor them at every comparison)
         let mut keyed: Vec<(u8, [i64; 3], u32)> = (0..points.len())
             .filter(|&i| group[i] != EXCLUDED)
-            .map(|i| (group[i], points[i].map(|c| floor(c / link)), i as u32))
+            .map(|i| (group[i], points[i].map(|c| (c / link).floor() as i64), i as u32))
             .collect();
         keyed.sort_unstable();
         let order: Vec<u32> = keyed.iter().map(|k| k.2).collect();
         let sorted: Vec<[f32; 3]> = order.iter().map(|&i| points[i as usize]).collect();
         let cell: Vec<[i64; 3]> = keyed.iter().map(|k| k.1).collect();
+        let groups: Vec<u8> = keyed.iter().map(|k| k.0).collect();
         let mut ranges: HashMap<Key, (u32, u32), BuildHasherDefault<KeyHasher>> = HashMap::default();
         let mut start = 0;
-        for k in 1..=sorted.len() {
-            let key = |k: usize| Key::new(cell[k], group[order[k] as usize]);
-            if k == sorted.len() || key(k) != key(start) {
-                ranges.insert(key(start), (start as u32, k as u32));
+        for k in 1..=cell.len() {
+            if k == cell.len() || cell[k] != cell[start] || groups[k] != groups[start] {
+                ranges.insert(Key::new(cell[start], groups[start]), (start as u32, k as u32));
                 start = k;
             }
         }
-        Ok(Self { link, sorted, index: order, cell, ranges })
+        Ok(Self { link, sorted, index: order, cell, group: groups, ranges })
     }
 
     fn linked(&self, a: usize, b: usize) -> bool {
@@ -129,15 +132,9 @@ impl Cells {
 
     /// The sorted positions of the points of `group` in the cell at `offset` from `cell`.
     fn get(&self, cell: [i64; 3], offset: [i64; 3], group: u8) -> std::ops::Range<usize> {
-        let key = Key::new([cell[0] + offset[0], cell[1] + offset[1], cell[2] + offset[2]], group);
-        self.ranges.get(&key).map_or(0..0, |&(a, b)| a as usize..b as usize)
+        let c = [cell[0] + offset[0], cell[1] + offset[1], cell[2] + offset[2]];
+        self.ranges.get(&Key::new(c, group)).map_or(0..0, |&(a, b)| a as usize..b as usize)
     }
-}
-
-/// `x.floor() as i64` without the libm call it compiles to on baseline x86-64.
-fn floor(x: f32) -> i64 {
-    let i = x as i64;
-    if (i as f32) > x { i - 1 } else { i }
 }
 
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
@@ -165,7 +162,7 @@ pub fn linked_components(points: &[[f32; 3]], group: &[u8], link: f32) -> Result
     let mut parent: Vec<u32> = (0..cells.sorted.len() as u32).collect();
     for &(start, end) in cells.ranges.values() {
         let (start, end) = (start as usize, end as usize);
-        let (cell, g) = (cells.cell[start], group[cells.index[start] as usize]);
+        let (cell, g) = (cells.cell[start], cells.group[start]);
         for a in start..end {
             for b in a + 1..end {
                 link_pair(&cells, &mut parent, a, b);
@@ -225,6 +222,110 @@ pub fn linked_to(points: &[[f32; 3]], group: &[u8], from: u8, to: u8, link: f32)
         found[cells.index[k] as usize] = answer;
     }
     Ok(found)
+}
+
+/// Point kinds for [`grow`].
+pub const SEED: u8 = 0;
+pub const ELIGIBLE: u8 = 1;
+pub const OTHER: u8 = 2;
+
+/// What [`grow`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grown {
+    /// The link used: `spacings` times the seeds' median distance to their 4th-nearest seed,
+    /// within `[link_min, link_max]`.
+    pub link: f32,
+    /// Per point: linked to a seed through seeds and eligible points.
+    pub part: Vec<bool>,
+    /// Whether an `OTHER` point lies within the link of the part.
+    pub touched: bool,
+}
+
+/// Grow a part from its seeds (docs/deformation.md, "Segmentation"): the link from the seeds'
+/// own spacing, then a breadth-first search from every seed over `SEED` and `ELIGIBLE` points.
+pub fn grow(points: &[[f32; 3]], kind: &[u8], spacings: f32, link_min: f32, link_max: f32) -> Result<Grown, ProximityError> {
+    if !(link_min > 0.0 && link_min <= link_max) {
+        return Err(ProximityError::BadLink(link_min));
+    }
+    // the link: the seeds' median 4th-neighbour distance among seeds, from about 2000 of them, on a
+    // grid of the seeds alone with cells as wide as the longest link
+    let seed_group: Vec<u8> = kind.iter().map(|&k| if k == SEED { 0 } else { EXCLUDED }).collect();
+    let spaced = Cells::new(points, &seed_group, link_max)?;
+    let step = (spaced.sorted.len() / 2000).max(1);
+    let mut fourth: Vec<f32> = (0..spaced.sorted.len())
+        .step_by(step)
+        .map(|k| {
+            let mut nearest = [f32::INFINITY; 4];
+            spaced.each_near(k, |j| {
+                let d = spaced.distance2(k, j);
+                if j != k && d < nearest[3] {
+                    nearest[3] = d;
+                    nearest.sort_unstable_by(f32::total_cmp);
+                }
+            });
+            nearest[3].sqrt()
+        })
+        .collect();
+    let link = if fourth.len() < 5 {
+        link_max
+    } else {
+        let middle = fourth.len() / 2;
+        let (_, median, _) = fourth.select_nth_unstable_by(middle, f32::total_cmp);
+        (spacings * *median).clamp(link_min, link_max)
+    };
+    let cells = Cells::new(points, &vec![0; points.len()], link)?;
+    let link2 = link * link;
+    let kind_of = |k: usize| kind[cells.index[k] as usize];
+    let near = |k: usize, want: &dyn Fn(usize) -> bool| {
+        let mut found = false;
+        cells.each_near(k, |j| found |= !found && want(j) && cells.distance2(k, j) <= link2);
+        found
+    };
+    // Seeds are the part. Scanning from them would cost a look around every one; instead the
+    // eligible points that touch a seed start a search over eligible points only.
+    let eligible: Vec<usize> = (0..cells.sorted.len()).filter(|&k| kind_of(k) == ELIGIBLE).collect();
+    let touching: Vec<bool> = eligible.par_iter().map(|&k| near(k, &|j| kind_of(j) == SEED)).collect();
+    let mut part: Vec<bool> = (0..cells.sorted.len()).map(|k| kind_of(k) == SEED).collect();
+    let mut queue: Vec<usize> = eligible.iter().zip(&touching).filter(|pair| *pair.1).map(|pair| *pair.0).collect();
+    for &k in &queue {
+        part[k] = true;
+    }
+    while let Some(k) = queue.pop() {
+        cells.each_near(k, |j| {
+            if kind_of(j) == ELIGIBLE && !part[j] && cells.distance2(k, j) <= link2 {
+                part[j] = true;
+                queue.push(j);
+            }
+        });
+    }
+    let others: Vec<usize> = (0..cells.sorted.len()).filter(|&k| kind_of(k) == OTHER).collect();
+    let touched = others.par_iter().any(|&k| near(k, &|j| part[j]));
+    let mut out = vec![false; points.len()];
+    for (k, &p) in part.iter().enumerate() {
+        out[cells.index[k] as usize] = p;
+    }
+    Ok(Grown { link, part: out, touched })
+}
+
+impl Cells {
+    fn distance2(&self, a: usize, b: usize) -> f32 {
+        let (p, q) = (self.sorted[a], self.sorted[b]);
+        (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)
+    }
+
+    /// Calls `visit(j)` for every sorted point `j` in the cells around sorted point `k` (its group).
+    fn each_near(&self, k: usize, mut visit: impl FnMut(usize)) {
+        let group = 0; // `grow` puts every point in group 0
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    for j in self.get(self.cell[k], [dx, dy, dz], group) {
+                        visit(j);
+                    }
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -301,6 +402,32 @@ mod tests {
             }
         }
         assert!(labels.iter().zip(&group).all(|(&l, &g)| (l == u32::MAX) == (g == EXCLUDED)));
+        // a far-away point changes nothing
+        let mut spread = points.clone();
+        spread.push([1.0e5, -1.0e5, 3.0e4]);
+        let mut spread_group = group.clone();
+        spread_group.push(0);
+        assert_eq!(&linked_components(&spread, &spread_group, link).unwrap()[..400], &labels[..]);
+        assert_eq!(linked_to(&spread, &spread_group, 0, 1, link).unwrap()[..400], linked_to(&points, &group, 0, 1, link).unwrap()[..]);
+    }
+
+    #[test]
+    fn growth_stops_at_gaps_and_reports_what_touches_the_part() {
+        // seeds along x every 0.1 (link from their spacing: 4th neighbour 0.2, x1.5 = 0.3), an
+        // eligible chain off them, an eligible point across a gap, and an other point touching
+        let mut points: Vec<[f32; 3]> = (0..30).map(|i| [i as f32 * 0.1, 0.0, 0.0]).collect();
+        let mut kind = vec![SEED; 30];
+        points.extend([[0.0, 0.25, 0.0], [0.0, 0.5, 0.0], [0.0, 1.5, 0.0], [2.0, 0.2, 0.0]]);
+        kind.extend([ELIGIBLE, ELIGIBLE, ELIGIBLE, OTHER]);
+        let grown = grow(&points, &kind, 1.5, 0.05, 0.4).unwrap();
+        assert!((grown.link - 0.3).abs() < 1e-5, "{}", grown.link);
+        assert!(grown.part[..32].iter().all(|&p| p) && !grown.part[32] && !grown.part[33]);
+        assert!(grown.touched);
+        kind[33] = ELIGIBLE;
+        let again = grow(&points, &kind, 1.5, 0.05, 0.4).unwrap();
+        assert!(again.part[33] && !again.touched);
+        // the link stays within its bounds
+        assert_eq!(grow(&points, &kind, 10.0, 0.05, 0.4).unwrap().link, 0.4);
     }
 
     #[test]
@@ -313,4 +440,5 @@ mod tests {
         assert_eq!(linked_to(&bad, &[0; 20], 0, 1, 0.1).unwrap_err(), ProximityError::NonFinitePoint(3));
     }
 }
+
 

@@ -1,5 +1,5 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
-//! `_core.linked_components(...)`, `_core.linked_to(...)`.
+//! `_core.linked_components(...)`, `_core.linked_to(...)`, `_core.grow_part(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -106,10 +106,32 @@ fn linked_to<'py>(
     Ok(found.iter().map(|n| n.map_or(-1, i64::from)).collect::<Vec<i64>>().into_pyarray(py))
 }
 
+/// Grow a part from its seeds: `points` (N, 3) float32, `kind` (N,) uint8 (0 seed, 1 eligible,
+/// 2 other). Returns (link, part (N,) bool, touched) (see `sketchrodgs_polyline::proximity::grow`).
+#[pyfunction]
+fn grow_part<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    kind: &Bound<'py, PyArray1<u8>>,
+    spacings: f32,
+    link_min: f32,
+    link_max: f32,
+) -> PyResult<(f32, Bound<'py, PyArray1<bool>>, bool)> {
+    let (points, kind) = (points.try_readonly()?, kind.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    check_shape("kind", kind.shape(), &[Some(points.shape()[0])])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let kind = contiguous(&kind, "kind")?;
+    let grown = run_parallel(py, "grow_part", || sketchrodgs_polyline::proximity::grow(points, kind, spacings, link_min, link_max))?
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    Ok((grown.link, grown.part.into_pyarray(py), grown.touched))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
     m.add_function(wrap_pyfunction!(linked_components, m)?)?;
     m.add_function(wrap_pyfunction!(linked_to, m)?)?;
+    m.add_function(wrap_pyfunction!(grow_part, m)?)?;
     Ok(())
 }
