@@ -12,7 +12,8 @@ from scipy.spatial.transform import Rotation
 from sketchrodgs import Camera, SketchRodGSError, extract_rod, load_scene, render, save_scene, synthetic
 from sketchrodgs.rod import Rod
 from sketchrodgs.segment import segment_and_bind
-from sketchrodgs.skin import BoundRod, Rig, matrices_to_quats, skin, skin_into
+from sketchrodgs.rig import Rig
+from sketchrodgs.skin import BoundRod, matrices_to_quats, skin, skin_into
 
 CAMERA = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, 1, 0), width=960, height=540, fov_y_deg=40)
 

@@ -14,7 +14,7 @@ from sketchrodgs.deform_metrics import psnr
 from sketchrodgs.realcases import load_cases
 from sketchrodgs.rod import Rod
 from sketchrodgs.scene import GaussianScene
-from sketchrodgs.skin import Rig
+from sketchrodgs.rig import Rig
 
 CASES = Path(__file__).parent / "data" / "real_cases" / "cases.json"
 

@@ -231,6 +231,41 @@ def test_second_rod_leaves_the_first_its_gaussians_and_remove_restores(ring, rin
     assert len(third.gaussian_ids) == len(first.gaussian_ids) and third.id == 2
 
 
+@pytest.fixture(scope="module")
+def plant():
+    scene = load_scene(data.sample("plant"))
+    return scene, extract_rod(scene, data.sample_camera("plant"), data.sample_stroke("plant"))
+
+
+def test_rod_set_splits_needles_and_undoes_it(plant):
+    """The plant stem's needles are split when its rod is added (the pieces appended to the set's
+    scene), hidden when it is removed, and made again from the input by a reset."""
+    scene, extraction = plant
+    n = len(scene)
+    rods = RodSet(scene)
+    entry = rods.add(extraction)
+    pieces = entry.gaussian_ids[entry.gaussian_ids >= n]
+    assert len(pieces) > 500 and len(rods.scene) == n + len(entry.pieces) and np.isin(pieces, entry.pieces).all()
+    np.testing.assert_array_equal(rods.source[:n], np.arange(n))
+    assert (rods.source[pieces] < n).all()  # pieces of its own needles and of static ones reaching in
+    assert rods.means.shape == (len(rods.scene), 3) and not rods.hidden.any()
+    pull(rods, entry.id, offset=(0.0, -0.05, 0.03))
+    moved = np.linalg.norm(rods.means[pieces] - rods.scene.means[pieces], axis=1)
+    assert moved.max() > 0.01  # the pieces follow the rod
+    rods.remove(entry.id)
+    assert rods.hidden[n:].all() and np.all(rods.scene.opacities[n:] == 0)
+    exported = rods.export_scene()
+    for field in ("means", "quats", "scales", "opacities"):
+        np.testing.assert_array_equal(getattr(exported, field), getattr(scene, field))
+    again = rods.add(extraction)  # the hidden pieces are not taken; the needles split anew
+    assert not np.isin(again.gaussian_ids, np.flatnonzero(rods.hidden)).any()
+    assert len(rods.scene) == n + 2 * len(entry.pieces)
+    rods.reset()
+    [again] = rods.entries
+    assert len(rods.scene) == n + len(entry.pieces) and not rods.hidden.any()
+    np.testing.assert_array_equal(rods.means, rods.scene.means)
+
+
 def test_reset_params_and_clamps(ring, ring_rod):
     rods = RodSet(ring)
     entry = rods.add(ring_rod)
@@ -382,6 +417,25 @@ def test_app_exports_and_modes(tmp_path, ring, ring_rod):
         app.remove_rod(app.rods.entries[0].id)
         assert len(app.rods) == 0 and len(app.display._scene_node.buffer) == len(ring)
         assert app.loop.timings.count > 0 and "frame" in app.panel.timings.content
+    finally:
+        app.close()
+
+
+@pytest.mark.parametrize("update", ["exact", "segments"])
+def test_app_shows_and_exports_split_needles(tmp_path, plant, update):
+    scene, extraction = plant
+    app = ViewerApp(scene, port=free_port(), up="-y", output_dir=tmp_path, fps=60, splat_update=update)
+    try:
+        entry = app.add_extraction(extraction)
+        assert len(app.display.splats) == len(app.rods.scene) > len(scene)
+        nodes = app.display._rods[entry.id]
+        assert sum(len(node.buffer) for node in nodes.splats) == len(entry.gaussian_ids)  # pieces included
+        assert len(app.display._scene_node.buffer) == len(app.rods.scene) - len(entry.gaussian_ids)
+        app.reset()  # rebuilt from the input: same rows again, nodes made anew
+        assert len(app.rods.scene) == len(app.display.splats)
+        app.remove_rod(app.rods.entries[0].id)
+        assert len(app.display._scene_node.buffer) == len(scene)  # the pieces are gone from view
+        assert len(load_any(app.export_ply())) == len(scene)
     finally:
         app.close()
 

@@ -23,6 +23,7 @@ from .io import load_scene, save_scene
 from .render import RenderResult, render
 from .rod import Rod, RodParams, World
 from .scene import GaussianScene
+from .rig import Rig
 from .skin import BoundRod, skin
 
 # A forked child has none of the worker threads of the parent's pool; it builds its own.
@@ -36,6 +37,7 @@ __all__ = [
     "GaussianScene",
     "PathNotFoundError",
     "RenderResult",
+    "Rig",
     "Rod",
     "RodParams",
     "SceneFormatError",

@@ -17,7 +17,8 @@ from .errors import SketchRodGSError
 from .extract import Extraction
 from .rod import Rod, RodParams, World
 from .scene import GaussianScene
-from .skin import DEFAULT_END_RAMP, Rig, skin_into
+from .rig import DEFAULT_END_RAMP, Rig
+from .skin import skin_into
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from .extract import extract_rod
 from .render import render
 from .rod import Rod
 from .scene import GaussianScene
-from .skin import Rig
+from .rig import Rig
 
 MOVED = 0.05  # a Gaussian "moved" when its centre moved more than this many R
 NEEDLE = 0.5  # a tip sticking out by more than this many R is a needle

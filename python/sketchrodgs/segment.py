@@ -102,7 +102,7 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
     points = _f32(means[rows])
     # The rod's extent: a centre past an end vertex is the part's within R of it (the end cap);
     # what continues past that is not.
-    at_end = _past_an_end(segment, t, len(polyline))
+    at_end = past_an_end(segment, t, len(polyline))
     eligible = (distance <= part_reach) & (~at_end | (distance <= radius))
     kind = np.where(eligible & (distance <= radius), 0, np.where(eligible, 1, 2)).astype(np.uint8)
     link, part, touched = _core.grow_part(points, kind, LINK_SPACINGS, LINK_MIN * radius, LINK_MAX * radius)
@@ -150,7 +150,7 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
     )
 
 
-def _past_an_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
+def past_an_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
     """Whether each nearest point is a rod end (the point lies past it)."""
     return ((segment == 0) & (t <= 0)) | ((segment == vertices - 2) & (t >= 1))
 

@@ -259,7 +259,8 @@ class ViewerApp:
         with self.rods.lock:
             entry = self.rods.add(extraction)
             with self.server.atomic():
-                self.display.show_scene(self.rods.owned_ids())
+                self.display.set_scene(self.rods.scene)
+                self.display.show_scene(self.rods.off_scene_node())
                 self.display.add_rod(entry)
         self._refresh_rod_list(select=entry.id)
         return entry
@@ -269,8 +270,9 @@ class ViewerApp:
             self.rods.remove(rod_id)
             self._grab_offsets.pop(rod_id, None)
             with self.server.atomic():
+                self.display.set_scene(self.rods.scene)
                 self.display.remove_rod(rod_id)
-                self.display.show_scene(self.rods.owned_ids())
+                self.display.show_scene(self.rods.off_scene_node())
         self._refresh_rod_list()
 
     def remove_all(self) -> None:
@@ -282,7 +284,19 @@ class ViewerApp:
         with self.rods.lock:
             self._grab_offsets.clear()
             self.rods.reset()
-            self.display.push(self.rods)
+            self._rebuild_display()
+
+    def _rebuild_display(self) -> None:
+        """Every node again, after the rods were rebuilt from the input scene (the rows of split
+        needles may have changed). Hold `rods.lock`."""
+        with self.server.atomic():
+            self.display.set_scene(self.rods.scene)
+            for rod_id in self.display.rod_ids():
+                self.display.remove_rod(rod_id)
+            for entry in self.rods.entries:
+                self.display.add_rod(entry)
+            self.display.show_scene(self.rods.off_scene_node())
+        self.display.push(self.rods)
 
     def _refresh_rod_list(self, select: int | None = None) -> None:
         names = tuple(f"rod {e.id}" for e in self.rods.entries) or (NO_ROD,)
@@ -322,7 +336,7 @@ class ViewerApp:
         """Write the deformed scene (exact skinning) as INRIA .ply."""
         target = Path(path) if path is not None else self.output_dir / "deformed.ply"
         target.parent.mkdir(parents=True, exist_ok=True)
-        save_scene(self.rods.deformed_scene(), target)
+        save_scene(self.rods.export_scene(), target)
         return target
 
     def save_rods(self, directory: str | Path | None = None) -> list[Path]:
@@ -371,7 +385,7 @@ class ViewerApp:
             with self.rods.lock:
                 self._grab_offsets.clear()
                 self.rods.set_params(panel.rod_params(-self.up))
-                self.display.push(self.rods)
+                self._rebuild_display()
             self._set_status("Material changed: the rods restarted from rest.")
 
         for widget in panel.material_inputs():

@@ -91,6 +91,7 @@ class SceneDisplay:
             raise ValueError(f"splat update: expected one of {SPLAT_UPDATES}, got {update!r}")
         self.server = server
         self.splats = SplatArrays.from_scene(scene)
+        self._scene = scene
         self.unit = splat_unit(scene.scales)  # every splat node has this scale (see splats.py)
         self.update = update
         self._on_handle_drag = on_handle_drag
@@ -104,6 +105,12 @@ class SceneDisplay:
         self.show_segmented = False
 
     # ----- the scene -----
+
+    def set_scene(self, scene: GaussianScene) -> None:
+        """The scene the nodes are made from, when rods change it (split needles are appended)."""
+        if scene is not self._scene:
+            self.splats = SplatArrays.from_scene(scene)
+            self._scene = scene
 
     def show_scene(self, owned: np.ndarray) -> float:
         """(Re)send the scene node without the Gaussians in `owned`; returns seconds spent."""

@@ -19,7 +19,8 @@ from ..errors import SketchRodGSError
 from ..extract import Extraction
 from ..rod import Rod, RodParams, World
 from ..scene import GaussianScene
-from ..skin import BoundRod, clamped_end_weights, skin_into
+from ..rig import Rig, clamped_end_weights
+from ..skin import BoundRod, skin_into
 
 # A rod sleeps (is no longer stepped or sent) once no vertex moved more than this fraction of
 # its length per frame for SLEEP_FRAMES frames in a row, with nothing grabbed.
@@ -38,6 +39,8 @@ class RodEntry:
         bound: its Gaussians, bound at rest.
         rest_edge_frames: (M-1, 3, 3) edge material frames at rest.
         length: rest length of the polyline.
+        pieces: rows its needle splitting appended to the set's scene (bound or not).
+        split: the input rows it split (their rows hold a first piece until it is removed).
     """
 
     id: int
@@ -46,6 +49,8 @@ class RodEntry:
     bound: BoundRod
     rest_edge_frames: np.ndarray
     length: float
+    pieces: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0, np.int64))
+    split: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0, np.int64))
 
     @property
     def gaussian_ids(self) -> np.ndarray:
@@ -59,14 +64,23 @@ class RodEntry:
 class RodSet:
     """Rods over one scene.
 
+    Each rod's needle Gaussians are split when it is added (docs/deformation.md, "Subdivision"):
+    the pieces are appended to `scene`, which so grows; `source` maps its rows to the input's.
+    When a rod is removed its Gaussians go back to the input's and its extra pieces are hidden
+    (opacity 0, left out of `export_scene`); `reset` rebuilds everything from the input.
+
     Args:
         scene: the scene at rest.
         params: material of new rods (each takes its extraction's radius).
         clamp_ends: clamp both ends of every rod (the authors' app does).
         skin_each_frame: skin the scene in every `step`; when False, `skinned` and
             `deformed_scene` skin on demand (for displays that move Gaussians by segment poses).
+        subdivide: split needles when a rod is added.
 
     Attributes:
+        scene: the input scene with the pieces of split needles appended (see above).
+        source: (N',) int64 the input row of each row of `scene`.
+        hidden: (N',) bool the pieces of removed rods.
         means, quats, scales: (N, 3), (N, 4) and (N, 3) float32, the scene's Gaussians as last
             skinned (rows of no rod stay at rest); see `skinned`.
         lock: held by every method; hold it to read `means`, `quats`, `scales` or the rods
@@ -74,8 +88,12 @@ class RodSet:
     """
 
     def __init__(self, scene: GaussianScene, params: RodParams = RodParams(), clamp_ends: bool = True,
-                 skin_each_frame: bool = True) -> None:
+                 skin_each_frame: bool = True, subdivide: bool = True) -> None:
+        self.input_scene = scene
         self.scene = scene
+        self.source = np.arange(len(scene), dtype=np.int64)
+        self.hidden = np.zeros(len(scene), bool)
+        self.subdivide = subdivide
         self.params = params
         self.clamp_ends = clamp_ends
         self.skin_each_frame = skin_each_frame
@@ -110,11 +128,16 @@ class RodSet:
         raise SketchRodGSError(f"no rod {rod_id}")
 
     def owned_ids(self) -> np.ndarray:
-        """(K,) int64 the Gaussians that follow some rod."""
+        """(K,) int64 the Gaussians (rows of `scene`) that follow some rod."""
         with self.lock:
             if not self._entries:
                 return np.empty(0, np.int64)
             return np.concatenate([e.gaussian_ids for e in self._entries])
+
+    def off_scene_node(self) -> np.ndarray:
+        """(K,) int64 rows the scene node leaves out: the rods' and the hidden ones."""
+        with self.lock:
+            return np.concatenate([self.owned_ids(), np.flatnonzero(self.hidden)])
 
     def add(self, extraction: Extraction) -> RodEntry:
         """Build a rod from `extraction` and bind its Gaussians; those already owned by another
@@ -128,7 +151,7 @@ class RodSet:
         if len(ids) and (ids.min() < 0 or ids.max() >= len(self.scene)):
             raise SketchRodGSError(f"rod binds Gaussian {int(ids.max())} but the scene has {len(self.scene)}")
         with self.lock:
-            keep = ~np.isin(ids, self.owned_ids())
+            keep = ~np.isin(ids, self.owned_ids()) & ~self.hidden[ids]
             extraction = _keep_binding(extraction, keep)
             entry = self._build(self._next_id, extraction, self._world)
             self._next_id += 1
@@ -138,7 +161,8 @@ class RodSet:
             return entry
 
     def remove(self, rod_id: int) -> None:
-        """Remove a rod; its Gaussians go back to rest and stay there."""
+        """Remove a rod; its Gaussians go back to the input's at rest and stay there (the extra
+        pieces of its split needles are hidden)."""
         with self.lock:
             entry = self.get(rod_id)
             k = self._entries.index(entry)
@@ -146,10 +170,16 @@ class RodSet:
             self._world.remove(entry.rod)
             self._entries.pop(k)
             self._previous.pop(k)
-            ids = entry.gaussian_ids
-            self.means[ids] = self.scene.means[ids]
-            self.quats[ids] = self.scene.quats[ids]
-            self.scales[ids] = self.scene.scales[ids]
+            arrays = {f: getattr(self.scene, f).copy() for f in ("means", "quats", "scales", "opacities")}
+            for field, values in arrays.items():
+                values[entry.split] = getattr(self.input_scene, field)[entry.split]
+            arrays["opacities"][entry.pieces] = 0.0
+            self.scene = self.scene.replace(**arrays)
+            self.hidden[entry.pieces] = True
+            for rows in (entry.gaussian_ids, entry.split):
+                self.means[rows] = self.scene.means[rows]
+                self.quats[rows] = self.scene.quats[rows]
+                self.scales[rows] = self.scene.scales[rows]
             self.version += 1
 
     def clear(self) -> None:
@@ -158,15 +188,19 @@ class RodSet:
                 self.remove(entry.id)
 
     def reset(self) -> None:
-        """Every rod back to rest (rebuilt with the current material and clamps), nothing grabbed."""
+        """Every rod back to rest (rebuilt from the input scene with the current material and
+        clamps), nothing grabbed, nothing hidden."""
         with self.lock:
             world = World()
-            self._entries = [self._build(e.id, e.extraction, world) for e in self._entries]
+            self.scene, self.source = self.input_scene, np.arange(len(self.input_scene), dtype=np.int64)
+            self.hidden = np.zeros(len(self.scene), bool)
+            self.means, self.quats, self.scales = (getattr(self.scene, f).copy() for f in ("means", "quats", "scales"))
+            entries = list(self._entries)
+            self._entries = []
+            for e in entries:  # each binds with the ones before it taken
+                self._entries.append(self._build(e.id, e.extraction, world))
             self._world = world
             self._previous = [np.asarray(e.rod.positions) for e in self._entries]
-            self.means[:] = self.scene.means
-            self.quats[:] = self.scene.quats
-            self.scales[:] = self.scene.scales
             self._stale = False
             self._awake = False
             self.version += 1
@@ -196,12 +230,25 @@ class RodSet:
         if self.clamp_ends:
             rod.clamp(0)
             rod.clamp(-1)
-        bound = BoundRod.from_extraction(self.scene, extraction, rod)
+        taken = np.zeros(len(self.scene), bool)
+        taken[self.owned_ids()] = True
+        taken |= self.hidden
+        rig = Rig.build(self.scene, [extraction], [rod], subdivide=self.subdivide, taken=taken)
+        old = len(self.scene)
+        pieces = np.arange(old, len(rig.scene), dtype=np.int64)
+        split = np.unique(rig.source[pieces])
+        # take the rig's scene: its new rows appended, its split rows replaced (all at rest)
+        self.source = self.source[rig.source]
+        self.hidden = np.concatenate([self.hidden, np.zeros(len(pieces), bool)])
+        self.scene = rig.scene
+        for field in ("means", "quats", "scales"):
+            grown = np.concatenate([getattr(self, field), getattr(rig.scene, field)[old:]])
+            grown[split] = getattr(rig.scene, field)[split]
+            setattr(self, field, np.ascontiguousarray(grown))
         polyline = np.asarray(extraction.polyline, np.float64)
         length = float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
-        entry = RodEntry(rod_id, extraction, rod, bound, np.array(rod.edge_frames, np.float64), length)
-        entry.bound = _eased(bound, entry)
-        return entry
+        return RodEntry(rod_id, extraction, rod, rig.bound[0], np.array(rod.edge_frames, np.float64), length,
+                        pieces, split)
 
     # ----- interaction -----
 
@@ -283,15 +330,21 @@ class RodSet:
             return self.means, self.quats, self.scales
 
     def deformed_scene(self) -> GaussianScene:
-        """The scene now (copies)."""
+        """The scene now (copies; the rows of `scene`, hidden ones included at opacity 0)."""
         with self.lock:
             means, quats, scales = self.skinned()
             return self.scene.replace(means=means.copy(), quats=quats.copy(), scales=scales.copy())
 
+    def export_scene(self) -> GaussianScene:
+        """The scene now without the hidden rows (what "Export deformed .ply" writes)."""
+        with self.lock:
+            scene = self.deformed_scene()
+            return scene if not self.hidden.any() else scene.subset(np.flatnonzero(~self.hidden))
+
 
 def _eased(bound: BoundRod, entry: RodEntry) -> BoundRod:
     """`bound` with its motion easing in at the rod's clamped ends (docs/deformation.md)."""
-    weight = clamped_end_weights(entry.extraction.binding, entry.rod, entry.extraction).astype(np.float32)
+    weight = clamped_end_weights(bound, entry.rod, entry.extraction).astype(np.float32)
     return dataclasses.replace(bound, weight=weight)
 
 
