@@ -213,3 +213,20 @@ def test_mismatched_rod_and_binding_are_errors(tube):
         skin(small, bound, rod)
     with pytest.raises(SketchRodGSError, match="rod 0: binds Gaussian 7999 but the scene has 10"):
         Rig.build(small, [extraction], [rod])
+
+
+def test_two_rods_over_the_same_needles_bind_the_pieces_at_their_centres():
+    """The second rod of a rig binds the pieces the first split: each at its own centre, so at
+    rest (both rods unmoved) nothing moves."""
+    from sketchrodgs import data
+
+    scene = load_scene(data.sample("plant"))
+    extraction = extract_rod(scene, data.sample_camera("plant"), data.sample_stroke("plant"))
+    rods = [Rod(extraction.polyline, radius=extraction.radius) for _ in range(2)]
+    rig = Rig.build(scene, [extraction, extraction], rods)
+    assert len(rig.scene) > len(scene)
+    # every piece of the extraction's own Gaussians is bound to the second rod too
+    own = np.flatnonzero(np.isin(rig.source, extraction.binding.gaussian_ids))
+    assert np.isin(own, rig.bound[1].gaussian_ids).all() and len(own) > len(extraction.binding.gaussian_ids)
+    at_rest = rig.skinned(rods)
+    np.testing.assert_allclose(at_rest.means, rig.scene.means, atol=1e-6)

@@ -61,19 +61,26 @@ class Rig:
         """
         if len(extractions) != len(rods):
             raise SketchRodGSError(f"{len(extractions)} extractions but {len(rods)} rods")
-        source = np.arange(len(scene), dtype=np.int64)
+        inputs = len(scene)
+        source = np.arange(inputs, dtype=np.int64)
         bound = []
         for k, (extraction, rod) in enumerate(zip(extractions, rods)):
             if rod.num_vertices != len(extraction.polyline):
                 raise SketchRodGSError(f"rod {k} has {rod.num_vertices} vertices but its extraction's "
                                        f"polyline {len(extraction.polyline)}")
             b = extraction.binding
-            if len(b.gaussian_ids) and b.gaussian_ids.max() >= len(source):
+            if len(b.gaussian_ids) and (b.gaussian_ids.min() < 0 or b.gaussian_ids.max() >= inputs):
                 raise SketchRodGSError(f"rod {k}: binds Gaussian {int(b.gaussian_ids.max())} "
-                                       f"but the scene has {len(source)}")
-            b = _expand(b, source)  # pieces an earlier rod split
+                                       f"but the scene has {inputs}")
+            b = _expand(b, source, scene.means, extraction.polyline)  # pieces an earlier rod split
             if subdivide:
-                scene, source, b = _split_needles(scene, source, b, extraction, taken)
+                # what an earlier rod bound keeps its geometry: that rod's binding refers to it
+                fixed = np.zeros(len(scene), bool)
+                for earlier in bound:
+                    fixed[earlier.gaussian_ids] = True
+                if taken is not None:
+                    fixed[: len(taken)] |= taken
+                scene, source, b = _split_needles(scene, source, b, extraction, fixed)
             bound.append(BoundRod.from_binding(scene, b, rod, clamped_end_weights(b, rod, extraction, end_ramp)))
         return cls(scene, source, bound)
 
@@ -119,24 +126,26 @@ def _rebind(binding: Binding, rows: np.ndarray, means: np.ndarray, polyline: np.
     return Binding(binding.gaussian_ids, segment, t, offset, binding.distance, binding.attached)
 
 
-def _expand(binding: Binding, source: np.ndarray) -> Binding:
-    """A binding of input rows, extended to the pieces an earlier rod split them into."""
-    if len(source) == len(np.unique(source)) or len(binding.gaussian_ids) == 0:
+def _expand(binding: Binding, source: np.ndarray, means: np.ndarray, polyline: np.ndarray) -> Binding:
+    """A binding of input rows, extended to the pieces an earlier rod split them into; those
+    pieces (the parent's own row included, which now holds a piece) are bound at their centres."""
+    counts = np.bincount(source)
+    if (counts <= 1).all() or len(binding.gaussian_ids) == 0:
         return binding
     order = np.argsort(binding.gaussian_ids)
     position = np.searchsorted(binding.gaussian_ids[order], source)
     position = np.minimum(position, len(order) - 1)
     hit = binding.gaussian_ids[order][position] == source
     rows = np.flatnonzero(hit)
-    parent = order[position[hit]]
-    b = binding.take(parent)
-    return Binding(rows.astype(np.int64), b.segment, b.t, b.offset, b.distance, b.attached)
+    b = binding.take(order[position[hit]])
+    expanded = Binding(rows.astype(np.int64), b.segment, b.t, b.offset, b.distance, b.attached)
+    return _rebind(expanded, np.flatnonzero(counts[source[rows]] > 1), means, polyline)
 
 
 def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, extraction: Extraction,
                    taken: np.ndarray | None = None):
-    """Split the needles among `binding`'s part rows, and the static needles that reach into the
-    part (a guitar string whose centre lies on the body, beyond the neck's end); the pieces are
+    """Split the needles among `binding`'s part rows (not `taken` ones), and the static needles
+    that reach into the part (a guitar string whose centre lies on the body, beyond the neck's end); the pieces are
     bound anew, a static needle's pieces all joining the binding (those past the rod's end move
     with the end; leaving them would tear the needle where it leaves the part)."""
     polyline = np.asarray(extraction.polyline, np.float64)
@@ -144,6 +153,8 @@ def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, e
     directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-30)
     part = np.flatnonzero(~binding.attached)
     reach = float(binding.distance[part].max()) if len(part) else extraction.radius
+    if taken is not None:
+        part = part[~taken[binding.gaussian_ids[part]]]  # bound elsewhere: not split again
     straddling, straddling_segment = _reaching_in(scene, binding, polyline, reach, extraction.edge_length)
     if taken is not None:
         free = ~taken[straddling]
