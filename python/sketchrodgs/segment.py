@@ -22,7 +22,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from . import _core
 from .polyline import near_box, polyline_length
@@ -111,12 +110,12 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
     attached = np.zeros(len(rows), bool)
     if attach and touched:
         # Attached parts: what a part can reach from where it joins, plus two links (a larger body
-        # shows itself by coming within a link of the edge). Distances to a densely sampled axis
-        # are exact enough out there.
+        # shows itself by coming within a link of the edge).
         reach = part_reach + attach_size + 2 * link
         around = near_box(polyline, means, reach)
         around = around[~np.isin(around, rows)]
-        far, past = _distances(polyline, means[around], reach, radius)
+        seg_far, t_far, far = _core.nearest_on_polyline(_f32(polyline), _f32(means[around]), reach)
+        past = np.where(past_an_end(seg_far, t_far, len(polyline)), np.where(seg_far == 0, 0, 1), -1)
         around, far, past = around[far <= reach], far[far <= reach], past[far <= reach]
         count = len(rows)
         end = np.concatenate([np.where(at_end, np.where(segment == 0, 0, 1), -1), past])  # past start, end, neither
@@ -153,21 +152,6 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
 def past_an_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
     """Whether each nearest point is a rod end (the point lies past it)."""
     return ((segment == 0) & (t <= 0)) | ((segment == vertices - 2) & (t >= 1))
-
-
-def _distances(polyline: np.ndarray, points: np.ndarray, reach: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from each point to the polyline sampled every R/4 (inf beyond `reach`), and
-    whether it lies past the start (0), the end (1) or neither (-1)."""
-    steps = np.linalg.norm(np.diff(polyline, axis=0), axis=1)
-    counts = np.maximum(1, np.ceil(steps / (radius / 4)).astype(np.int64))
-    segment = np.repeat(np.arange(len(steps)), counts)
-    fraction = (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts) + 1) / counts[segment]
-    samples = np.concatenate([polyline[:1], polyline[segment] + fraction[:, None] * (polyline[segment + 1] - polyline[segment])])
-    distance, index = cKDTree(samples).query(points, distance_upper_bound=reach)
-    past = np.full(len(points), -1)
-    for which, k, inward in ((0, 0, polyline[1] - polyline[0]), (1, len(samples) - 1, polyline[-2] - polyline[-1])):
-        past[(index == k) & ((points - samples[k]) @ inward < 0)] = which
-    return distance, past
 
 
 def _attached_parts(points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float,

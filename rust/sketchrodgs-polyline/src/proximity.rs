@@ -247,18 +247,20 @@ pub fn grow(points: &[[f32; 3]], kind: &[u8], spacings: f32, link_min: f32, link
     if !(link_min > 0.0 && link_min <= link_max) {
         return Err(ProximityError::BadLink(link_min));
     }
-    // the link: the seeds' median 4th-neighbour distance among seeds, from about 2000 of them, on a
-    // grid of the seeds alone with cells as wide as the longest link
-    let seed_group: Vec<u8> = kind.iter().map(|&k| if k == SEED { 0 } else { EXCLUDED }).collect();
-    let spaced = Cells::new(points, &seed_group, link_max)?;
-    let step = (spaced.sorted.len() / 2000).max(1);
-    let mut fourth: Vec<f32> = (0..spaced.sorted.len())
+    // one grid, cells as wide as the longest link, for the link and the search
+    let cells = Cells::new(points, &vec![0; points.len()], link_max)?;
+    let kind_of = |k: usize| kind[cells.index[k] as usize];
+    // the link: the seeds' median 4th-neighbour distance among seeds, from about 2000 of them
+    let seeds: Vec<usize> = (0..cells.sorted.len()).filter(|&k| kind_of(k) == SEED).collect();
+    let step = (seeds.len() / 2000).max(1);
+    let mut fourth: Vec<f32> = seeds
+        .iter()
         .step_by(step)
-        .map(|k| {
+        .map(|&k| {
             let mut nearest = [f32::INFINITY; 4];
-            spaced.each_near(k, |j| {
-                let d = spaced.distance2(k, j);
-                if j != k && d < nearest[3] {
+            cells.each_near(k, |j| {
+                let d = cells.distance2(k, j);
+                if j != k && kind_of(j) == SEED && d < nearest[3] {
                     nearest[3] = d;
                     nearest.sort_unstable_by(f32::total_cmp);
                 }
@@ -273,9 +275,7 @@ pub fn grow(points: &[[f32; 3]], kind: &[u8], spacings: f32, link_min: f32, link
         let (_, median, _) = fourth.select_nth_unstable_by(middle, f32::total_cmp);
         (spacings * *median).clamp(link_min, link_max)
     };
-    let cells = Cells::new(points, &vec![0; points.len()], link)?;
     let link2 = link * link;
-    let kind_of = |k: usize| kind[cells.index[k] as usize];
     let near = |k: usize, want: &dyn Fn(usize) -> bool| {
         let mut found = false;
         cells.each_near(k, |j| found |= !found && want(j) && cells.distance2(k, j) <= link2);
