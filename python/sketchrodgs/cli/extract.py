@@ -71,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
         save_png(args.overlay, overlay)
     pieces = len(extraction.pixel_path)
     print(f"rod: {len(extraction.polyline)} vertices, radius {extraction.radius:.4g}, edge {extraction.edge_length:.4g}; "
-          f"{len(extraction.gaussian_ids):,} Gaussians bound; stroke covered {extraction.coverage:.0%} "
+          f"{len(extraction.gaussian_ids):,} Gaussians bound ({int(extraction.binding.attached.sum()):,} in attached "
+          f"parts); stroke covered {extraction.coverage:.0%} "
           f"in {pieces} piece{'s' if pieces > 1 else ''} -> {args.output}")
     timings = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in extraction.timings.items())
     print(f"timings: {timings}")
