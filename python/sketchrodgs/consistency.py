@@ -17,6 +17,8 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from .polyline import arc_lengths
+
 # Directed distances are taken from points this far apart along the polyline, at most (as a
 # fraction of the radius), and from no more than MAX_SAMPLES points.
 SAMPLE_SPACING = 0.25
@@ -34,10 +36,6 @@ def _as_polyline(points: np.ndarray, dims: int, name: str) -> np.ndarray:
     return array
 
 
-def _arc_lengths(points: np.ndarray) -> np.ndarray:
-    return np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))]
-
-
 def _point_at(points: np.ndarray, arc: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Points at arc lengths `s` along the polyline (linear interpolation)."""
     return np.stack([np.interp(s, arc, points[:, k]) for k in range(points.shape[1])], axis=1)
@@ -45,7 +43,7 @@ def _point_at(points: np.ndarray, arc: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 def _resample(points: np.ndarray, count: int) -> np.ndarray:
     """`count` points evenly spaced in arc length, both ends included."""
-    arc = _arc_lengths(points)
+    arc = arc_lengths(points)
     return _point_at(points, arc, np.linspace(0.0, arc[-1], count))
 
 
@@ -55,7 +53,7 @@ def _nearest_on_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.n
     edges = ends - starts
     lengths2 = np.einsum("ij,ij->i", edges, edges)
     safe = np.where(lengths2 > 0, lengths2, 1.0)
-    arc = _arc_lengths(polyline)
+    arc = arc_lengths(polyline)
     seg_len = np.sqrt(lengths2)
     distance = np.empty(len(points))
     where = np.empty(len(points))
@@ -76,7 +74,7 @@ def _nearest_on_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.n
 def _directed(samples: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distances from `samples` to `other` and whether each projects inside `other`."""
     distance, where = _nearest_on_polyline(samples, other)
-    total = _arc_lengths(other)[-1]
+    total = arc_lengths(other)[-1]
     eps = 1e-9 * max(total, 1e-300)
     inside = (where > eps) & (where < total - eps)
     return distance, inside
@@ -112,7 +110,7 @@ def polyline_agreement(a: np.ndarray, b: np.ndarray, radius: float) -> dict[str,
         raise ValueError(f"radius: must be finite and > 0, got {radius}")
     samples = []
     for poly in (a, b):
-        length = _arc_lengths(poly)[-1]
+        length = arc_lengths(poly)[-1]
         count = int(np.clip(np.ceil(length / (SAMPLE_SPACING * radius)) + 1, MIN_SAMPLES, MAX_SAMPLES))
         samples.append(_resample(poly, count))
     dist_ab, in_ab = _directed(samples[0], b)
@@ -125,7 +123,7 @@ def polyline_agreement(a: np.ndarray, b: np.ndarray, radius: float) -> dict[str,
         else:
             means.append(np.inf)
             maxima.append(np.inf)
-    shorter_inside = in_ab if _arc_lengths(a)[-1] <= _arc_lengths(b)[-1] else in_ba
+    shorter_inside = in_ab if arc_lengths(a)[-1] <= arc_lengths(b)[-1] else in_ba
     return {
         "mean": 0.5 * (means[0] + means[1]),
         "max": max(maxima),
@@ -155,7 +153,7 @@ def _change_ends(stroke: np.ndarray, choices: tuple[int, int], amount: float) ->
     """Shorten (-1), keep (0) or extend (+1) each end by `amount` px of arc length."""
     if amount <= 0:
         return stroke.copy()
-    arc = _arc_lengths(stroke)
+    arc = arc_lengths(stroke)
     total = arc[-1]
     start_s, end_s = 0.0, total
     # An end is shortened only if at least `amount` px of stroke is left afterwards.

@@ -94,6 +94,11 @@ def laplacian_smooth(points: np.ndarray, iterations: int, weight: float = 0.5) -
     return out
 
 
+def arc_lengths(points: np.ndarray) -> np.ndarray:
+    """(M,) float64 the arc length at each point of a polyline (0 at the first)."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(np.asarray(points, np.float64), axis=0), axis=1))])
+
+
 def polyline_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 
@@ -114,7 +119,7 @@ def resample(points: np.ndarray, edge_length: float) -> np.ndarray:
         (K, 3) float64 with K >= 2.
     """
     points = np.asarray(points, np.float64)
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    arc = arc_lengths(points)
     edges = max(1, int(round(arc[-1] / edge_length))) if edge_length > 0 else 1
     s = np.linspace(0.0, arc[-1], edges + 1)
     return np.stack([np.interp(s, arc, points[:, k]) for k in range(3)], axis=1)

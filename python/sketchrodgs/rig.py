@@ -16,10 +16,10 @@ from . import _core
 from . import subdivide as sd
 from .errors import SketchRodGSError
 from .extract import Extraction
-from .polyline import near_box
+from .polyline import arc_lengths, near_box
 from .rod import Rod
 from .scene import GaussianScene
-from .segment import Binding, past_an_end
+from .segment import Binding, past_an_end, point_at
 from .skin import BoundRod, skin_into
 
 # Clamped ends ease in over this many R (`Rig.build`).
@@ -101,7 +101,7 @@ def clamped_end_weights(binding: Binding | BoundRod, rod: Rod, extraction: Extra
     if not ends or ramp <= 0 or len(binding.segment) == 0:
         return weight
     polyline = np.asarray(extraction.polyline, np.float64)
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))])
+    arc = arc_lengths(polyline)
     at = arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
     for end in ends:
         s = np.clip((at if end == 0 else arc[-1] - at) / (ramp * extraction.radius), 0.0, 1.0)
@@ -120,10 +120,18 @@ def _rebind(binding: Binding, rows: np.ndarray, means: np.ndarray, polyline: np.
         # every centre is within its distance to the first vertex of the polyline
         reach = float(np.linalg.norm(centres - polyline[0], axis=1).max()) * 1.001 + 1e-9
         segment[own], t[own], _ = _core.nearest_on_polyline(polyline.astype(np.float32), centres, reach)
-    a = polyline[segment]
-    rest_points = a + t[:, None].astype(np.float64) * (polyline[segment + 1] - a)
-    offset = (means[binding.gaussian_ids] - rest_points).astype(np.float32)
+    offset = (means[binding.gaussian_ids] - point_at(polyline, segment, t)).astype(np.float32)
     return Binding(binding.gaussian_ids, segment, t, offset, binding.distance, binding.attached)
+
+
+def _entries_of(ids: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each of `rows`: whether it is among `ids` (unique), and the position there if so."""
+    if len(ids) == 0:
+        return np.zeros(len(rows), bool), np.zeros(0, np.int64)
+    order = np.argsort(ids)
+    position = np.minimum(np.searchsorted(ids[order], rows), len(ids) - 1)
+    hit = ids[order][position] == rows
+    return hit, order[position[hit]]
 
 
 def _expand(binding: Binding, source: np.ndarray, means: np.ndarray, polyline: np.ndarray) -> Binding:
@@ -132,12 +140,9 @@ def _expand(binding: Binding, source: np.ndarray, means: np.ndarray, polyline: n
     counts = np.bincount(source)
     if (counts <= 1).all() or len(binding.gaussian_ids) == 0:
         return binding
-    order = np.argsort(binding.gaussian_ids)
-    position = np.searchsorted(binding.gaussian_ids[order], source)
-    position = np.minimum(position, len(order) - 1)
-    hit = binding.gaussian_ids[order][position] == source
+    hit, entries = _entries_of(binding.gaussian_ids, source)
     rows = np.flatnonzero(hit)
-    b = binding.take(order[position[hit]])
+    b = binding.take(entries)
     expanded = Binding(rows.astype(np.int64), b.segment, b.t, b.offset, b.distance, b.attached)
     return _rebind(expanded, np.flatnonzero(counts[source[rows]] > 1), means, polyline)
 
@@ -145,9 +150,9 @@ def _expand(binding: Binding, source: np.ndarray, means: np.ndarray, polyline: n
 def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, extraction: Extraction,
                    taken: np.ndarray | None = None):
     """Split the needles among `binding`'s part rows (not `taken` ones), and the static needles
-    that reach into the part (a guitar string whose centre lies on the body, beyond the neck's end); the pieces are
-    bound anew, a static needle's pieces all joining the binding (those past the rod's end move
-    with the end; leaving them would tear the needle where it leaves the part)."""
+    that reach into the part (a guitar string whose centre lies on the body, beyond the neck's
+    end). Every piece is bound anew; of a static needle, the pieces that lie in the part join the
+    binding and the others stay."""
     polyline = np.asarray(extraction.polyline, np.float64)
     directions = np.diff(polyline, axis=0)
     directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-30)
@@ -168,14 +173,11 @@ def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, e
     scene, new_source, piece_rows = sd.split(scene, rows, counts)
     source = np.concatenate([source, source[new_source[first:]]])
     # the appended pieces of bound Gaussians take their parent's binding entry...
-    where = {int(g): i for i, g in enumerate(binding.gaussian_ids)}
     appended = np.arange(first, len(scene), dtype=np.int64)
-    of_bound = np.array([int(g) in where for g in new_source[first:]], bool)
-    parents = np.array([where[int(g)] for g in new_source[first:][of_bound]], np.int64)
+    of_bound, parents = _entries_of(binding.gaussian_ids, new_source[first:])
     extra = binding.take(parents)
-    fields = ("segment", "t", "offset", "distance", "attached")
-    binding = Binding(np.concatenate([binding.gaussian_ids, appended[of_bound]]),
-                      *(np.concatenate([getattr(binding, f), getattr(extra, f)]) for f in fields))
+    binding = binding.extend(Binding(appended[of_bound], extra.segment, extra.t, extra.offset, extra.distance,
+                                     extra.attached))
     # ...and a static needle's pieces join it where they lie in the part (bound by `_rebind`)
     static_pieces = np.concatenate([straddling, appended[~of_bound]])
     seg, t, _ = _core.nearest_on_polyline(polyline.astype(np.float32), scene.means[static_pieces], reach)
@@ -183,7 +185,7 @@ def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, e
     count = len(static_pieces)
     joined = Binding(static_pieces, np.zeros(count, np.int32), np.zeros(count, np.float32),
                      np.zeros((count, 3), np.float32), np.zeros(count, np.float32), np.zeros(count, bool))
-    binding = Binding(*(np.concatenate([getattr(binding, f), getattr(joined, f)]) for f in ("gaussian_ids",) + fields))
+    binding = binding.extend(joined)
     pieces = np.flatnonzero(np.isin(binding.gaussian_ids, piece_rows))
     return scene, source, _rebind(binding, pieces, scene.means, polyline)
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from .polyline import near_box, polyline_length
+from .polyline import arc_lengths, near_box, polyline_length
 from .scene import GaussianScene
 
 # The part's cross-section reaches this many R from the axis. Surface Gaussians sit at about one
@@ -72,6 +72,10 @@ class Binding:
         """The binding of a subset (rows index this binding)."""
         return Binding(*(getattr(self, f)[rows] for f in Binding.__dataclass_fields__))
 
+    def extend(self, other: Binding) -> Binding:
+        """This binding followed by `other`'s entries."""
+        return Binding(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in Binding.__dataclass_fields__))
+
 
 def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, *, grow: float = DEFAULT_GROW,
                      attach: bool = True, attach_size: float | None = None) -> Binding:
@@ -115,17 +119,17 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
         around = near_box(polyline, means, reach)
         around = around[~np.isin(around, rows)]
         seg_far, t_far, far = _core.nearest_on_polyline(_f32(polyline), _f32(means[around]), reach)
-        past = np.where(past_an_end(seg_far, t_far, len(polyline)), np.where(seg_far == 0, 0, 1), -1)
+        past = which_end(seg_far, t_far, len(polyline))
         around, far, past = around[far <= reach], far[far <= reach], past[far <= reach]
         count = len(rows)
-        end = np.concatenate([np.where(at_end, np.where(segment == 0, 0, 1), -1), past])  # past start, end, neither
+        end = np.concatenate([which_end(segment, t, len(polyline)), past])
         rows = np.concatenate([rows, around])
         distance = np.concatenate([distance, far])
         points = _f32(means[rows])
         part = np.concatenate([part, np.zeros(len(around), bool)])
         home = np.concatenate([home, np.full(len(around), -1)])
         attached = np.zeros(len(rows), bool)
-        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))])
+        arc = arc_lengths(polyline)
         along = np.full(len(rows), np.nan)
         along[:count] = arc[segment] + t * (arc[segment + 1] - arc[segment])
         attached_rows, contact = _attached_parts(points, link, part, distance, reach - link, attach_size)
@@ -141,17 +145,30 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
     # (every home is a part row, so it has one).
     seg = segment[home[keep]]
     par = t[home[keep]]
-    a = polyline[seg]
-    rest_points = a + par[:, None].astype(np.float64) * (polyline[seg + 1] - a)
+    rest_points = point_at(polyline, seg, par)
     return Binding(
         rows[keep].astype(np.int64), seg.astype(np.int32), par.astype(np.float32),
         (centres[keep] - rest_points).astype(np.float32), distance[keep].astype(np.float32), attached[keep],
     )
 
 
+def which_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
+    """Per nearest point `(segment, t)` on a polyline of `vertices`: 0 where the point lies past
+    its start, 1 past its end, -1 beside it."""
+    start = (segment == 0) & (t <= 0)
+    end = (segment == vertices - 2) & (t >= 1)
+    return np.where(start, 0, np.where(end, 1, -1))
+
+
 def past_an_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
     """Whether each nearest point is a rod end (the point lies past it)."""
-    return ((segment == 0) & (t <= 0)) | ((segment == vertices - 2) & (t >= 1))
+    return which_end(segment, t, vertices) >= 0
+
+
+def point_at(polyline: np.ndarray, segment: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(G, 3) float64 the points at `(segment, t)` on `polyline`."""
+    a = polyline[segment]
+    return a + np.asarray(t, np.float64)[:, None] * (polyline[segment + 1] - a)
 
 
 def _attached_parts(points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float,

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .polyline import arc_lengths
 from .scene import GaussianScene
 
 Curve = Callable[[np.ndarray], np.ndarray]  # (S,) parameters in [0, 1] -> (S, 3) points
@@ -38,7 +39,7 @@ class TubeScene:
 def sample_curve(curve: Curve, samples: int = 2000) -> tuple[np.ndarray, np.ndarray]:
     """Points of `curve` at `samples` parameters and their cumulative arc length."""
     points = curve(np.linspace(0.0, 1.0, samples))
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    arc = arc_lengths(points)
     return points, arc
 
 

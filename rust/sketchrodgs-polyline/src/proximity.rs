@@ -46,12 +46,6 @@ impl std::hash::Hash for Key {
     }
 }
 
-impl Key {
-    fn new(cell: [i64; 3], group: u8) -> Self {
-        Key(cell, group)
-    }
-}
-
 /// The key mixes itself (`Key::hash`); the default SipHash made the cell lookups the bulk of the
 /// work.
 #[derive(Default)]
@@ -118,7 +112,7 @@ impl Cells {
         let mut start = 0;
         for k in 1..=cell.len() {
             if k == cell.len() || cell[k] != cell[start] || groups[k] != groups[start] {
-                ranges.insert(Key::new(cell[start], groups[start]), (start as u32, k as u32));
+                ranges.insert(Key(cell[start], groups[start]), (start as u32, k as u32));
                 start = k;
             }
         }
@@ -133,7 +127,7 @@ impl Cells {
     /// The sorted positions of the points of `group` in the cell at `offset` from `cell`.
     fn get(&self, cell: [i64; 3], offset: [i64; 3], group: u8) -> std::ops::Range<usize> {
         let c = [cell[0] + offset[0], cell[1] + offset[1], cell[2] + offset[2]];
-        self.ranges.get(&Key::new(c, group)).map_or(0..0, |&(a, b)| a as usize..b as usize)
+        self.ranges.get(&Key(c, group)).map_or(0..0, |&(a, b)| a as usize..b as usize)
     }
 }
 

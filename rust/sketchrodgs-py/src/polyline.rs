@@ -3,6 +3,7 @@
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use sketchrodgs_polyline::proximity::{self, ProximityError};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
 use crate::pool::run_parallel;
@@ -66,6 +67,23 @@ fn cross_section_centroids<'py>(
     Ok((centroids.into_pyarray(py), counts.into_pyarray(py)))
 }
 
+/// Run a proximity query on `points` (N, 3) float32 and a per-point uint8 array (`name`).
+fn on_points<'py, T: Send>(
+    py: Python<'py>,
+    what: &str,
+    points: &Bound<'py, PyArray2<f32>>,
+    per_point: &Bound<'py, PyArray1<u8>>,
+    name: &str,
+    query: impl FnOnce(&[[f32; 3]], &[u8]) -> Result<T, ProximityError> + Send,
+) -> PyResult<T> {
+    let (points, per_point) = (points.try_readonly()?, per_point.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    check_shape(name, per_point.shape(), &[Some(points.shape()[0])])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let per_point = contiguous(&per_point, name)?;
+    run_parallel(py, what, || query(points, per_point))?.map_err(|e| SketchRodGSError::new_err(e.to_string()))
+}
+
 /// Components of the links between `points` (N, 3) float32 at most `link` apart within the same
 /// `group` (N,) uint8 (255: no links). Returns (N,) int64 labels 0, 1, ... (-1 for group 255).
 #[pyfunction]
@@ -75,13 +93,7 @@ fn linked_components<'py>(
     group: &Bound<'py, PyArray1<u8>>,
     link: f32,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let (points, group) = (points.try_readonly()?, group.try_readonly()?);
-    check_shape("points", points.shape(), &[None, Some(3)])?;
-    check_shape("group", group.shape(), &[Some(points.shape()[0])])?;
-    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let group = contiguous(&group, "group")?;
-    let labels = run_parallel(py, "linked_components", || sketchrodgs_polyline::proximity::linked_components(points, group, link))?
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let labels = on_points(py, "linked_components", points, group, "group", |p, g| proximity::linked_components(p, g, link))?;
     Ok(labels.iter().map(|&l| if l == u32::MAX { -1 } else { i64::from(l) }).collect::<Vec<i64>>().into_pyarray(py))
 }
 
@@ -96,13 +108,7 @@ fn linked_to<'py>(
     target: u8,
     link: f32,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let (points, group) = (points.try_readonly()?, group.try_readonly()?);
-    check_shape("points", points.shape(), &[None, Some(3)])?;
-    check_shape("group", group.shape(), &[Some(points.shape()[0])])?;
-    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let group = contiguous(&group, "group")?;
-    let found = run_parallel(py, "linked_to", || sketchrodgs_polyline::proximity::linked_to(points, group, source, target, link))?
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let found = on_points(py, "linked_to", points, group, "group", |p, g| proximity::linked_to(p, g, source, target, link))?;
     Ok(found.iter().map(|n| n.map_or(-1, i64::from)).collect::<Vec<i64>>().into_pyarray(py))
 }
 
@@ -117,13 +123,7 @@ fn grow_part<'py>(
     link_min: f32,
     link_max: f32,
 ) -> PyResult<(f32, Bound<'py, PyArray1<bool>>, bool)> {
-    let (points, kind) = (points.try_readonly()?, kind.try_readonly()?);
-    check_shape("points", points.shape(), &[None, Some(3)])?;
-    check_shape("kind", kind.shape(), &[Some(points.shape()[0])])?;
-    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let kind = contiguous(&kind, "kind")?;
-    let grown = run_parallel(py, "grow_part", || sketchrodgs_polyline::proximity::grow(points, kind, spacings, link_min, link_max))?
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let grown = on_points(py, "grow_part", points, kind, "kind", |p, k| proximity::grow(p, k, spacings, link_min, link_max))?;
     Ok((grown.link, grown.part.into_pyarray(py), grown.touched))
 }
 
