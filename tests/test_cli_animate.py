@@ -69,7 +69,7 @@ def test_animate_mp4(ring_rod, tmp_path):
 
 def test_bad_rod_files_and_arguments_fail_readably(ring_rod, tmp_path):
     path, extraction = ring_rod
-    broken = json.loads(path.read_text())
+    broken = extraction.to_json()  # the inline form older rod files have
     broken["binding"]["segment"] = broken["binding"]["segment"][:-1]
     (tmp_path / "broken.json").write_text(json.dumps(broken))
     result = run_cli("animate", "sample:ring", str(tmp_path / "broken.json"), "--grab", "3", "--to", "0,0.1,0",

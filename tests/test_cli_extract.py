@@ -10,6 +10,7 @@ import numpy as np
 from PIL import Image
 
 from sketchrodgs import Camera, data, load_scene
+from sketchrodgs.extract import load_rod
 
 CAMERA = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=480, height=270, fov_y_deg=40)
 
@@ -34,8 +35,9 @@ def test_extract_writes_rod_json_and_overlay(tmp_path):
     rod = json.loads((tmp_path / "rod.json").read_text())
     polyline = np.array(rod["polyline"])
     assert polyline.shape[1] == 3 and len(polyline) >= 10
-    assert rod["radius"] > 0 and len(rod["gaussian_ids"]) > 1000 and len(rod["stroke"]) == 25
-    assert max(rod["gaussian_ids"]) < len(load_scene(data.sample("ring")))
+    ids = load_rod(tmp_path / "rod.json")[0].gaussian_ids
+    assert rod["radius"] > 0 and len(ids) > 1000 and len(rod["stroke"]) == 25
+    assert ids.max() < len(load_scene(data.sample("ring")))
     overlay = np.asarray(Image.open(tmp_path / "o.png"))
     assert overlay.shape == (270, 480, 3)
     # the stroke (green) and the polyline (blue) are drawn
@@ -86,11 +88,11 @@ def test_extract_can_leave_attached_parts_behind(tmp_path):
         result = run_cli("extract", "sample:plant", "--camera", str(tmp_path / "cam.json"), "--stroke",
                          str(tmp_path / "stroke.json"), "-o", str(tmp_path / f"{name}.json"), *extra)
         assert result.returncode == 0, result.stderr
-        rods[name] = json.loads((tmp_path / f"{name}.json").read_text())
-    assert sum(rods["default"]["binding"]["attached"]) > 100
+        rods[name] = load_rod(tmp_path / f"{name}.json")[0]
+    assert rods["default"].binding.attached.sum() > 100
     for name in ("none", "small"):
-        assert sum(rods[name]["binding"]["attached"]) == 0
-        assert len(rods[name]["gaussian_ids"]) < len(rods["default"]["gaussian_ids"])
+        assert rods[name].binding.attached.sum() == 0
+        assert len(rods[name].gaussian_ids) < len(rods["default"].gaussian_ids)
     result = run_cli("extract", "sample:plant", "--camera", str(tmp_path / "cam.json"), "--stroke",
                      str(tmp_path / "stroke.json"), "-o", str(tmp_path / "x.json"), "--attach-size", "-1")
     assert result.returncode == 2 and "attach-size" in result.stderr

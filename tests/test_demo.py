@@ -10,6 +10,7 @@ import numpy as np
 from PIL import Image
 
 from sketchrodgs import Camera, data, load_scene
+from sketchrodgs.extract import load_rod
 
 
 def test_demo_writes_everything_it_promises(tmp_path):
@@ -28,7 +29,7 @@ def test_demo_writes_everything_it_promises(tmp_path):
     stroke = data.sample_stroke("plant")
     gaps = np.min(np.linalg.norm(uv[:, None] - stroke[None], axis=2), axis=1)
     assert np.median(gaps) < 15, gaps
-    assert 300 < len(rod["gaussian_ids"]) < len(load_scene(data.sample("plant"))) // 20
+    assert 300 < len(load_rod(out / "rod.json")[0].gaussian_ids) < len(load_scene(data.sample("plant"))) // 20
     # the pulled frame differs from the view where the stem is, and the last frame is back at rest
     view, pulled, last = (np.asarray(Image.open(out / n), np.int16) for n in ("view.png", "pulled.png", "frames/frame_0060.png"))
     moved = np.abs(pulled - view).max(axis=2) > 40

@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 
 from sketchrodgs import Camera, PathNotFoundError, SketchRodGSError, load_scene, synthetic
 from sketchrodgs.baseline import knn_path
-from sketchrodgs.extract import Extraction, extract_rod
+from sketchrodgs.extract import Extraction, extract_rod, load_rod
 from sketchrodgs.render import render
 
 CAMERA = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, 1, 0), width=960, height=540, fov_y_deg=40)
@@ -185,10 +185,45 @@ def test_rod_json_round_trip(tmp_path):
     ex.save(tmp_path / "rod.json", material={"youngs_modulus": 1e6})
     data = json.loads((tmp_path / "rod.json").read_text())
     np.testing.assert_allclose(data["polyline"], ex.polyline, atol=1e-6)
-    assert data["radius"] == ex.radius and data["gaussian_ids"] == ex.gaussian_ids.tolist()
+    assert data["radius"] == ex.radius and data["bindings"] == {"file": "rod.bindings.npz", "count": len(ex.gaussian_ids),
+                                                                "format": 1}
+    back, _ = load_rod(tmp_path / "rod.json")
+    for name in ("gaussian_ids", "segment", "t", "offset", "attached"):
+        got, want = getattr(back.binding, name), getattr(ex.binding, name)
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)  # exactly
     assert Camera.from_dict(data["camera"]).width == 960
     assert data["material"] == {"youngs_modulus": 1e6}
     assert isinstance(ex, Extraction)
+
+
+def test_rod_files_keep_bindings_small_and_refuse_broken_ones(tmp_path):
+    tubes = synthetic.tube_scene([synthetic.straight], radius=0.01, seed=2, clutter=0)
+    ex = extract_rod(tubes.scene, CAMERA, stroke_along(tubes.axes[0]), radius=0.01)
+    ex.save(tmp_path / "rod.json")
+    npz = tmp_path / "rod.bindings.npz"
+    # ids as deltas, float32 positions: under 2 MB per 100k bound Gaussians (inline JSON takes ~10)
+    assert npz.stat().st_size / len(ex.gaussian_ids) * 1e5 < 2e6
+    # a rod file of the older inline form still loads
+    (tmp_path / "old.json").write_text(json.dumps(ex.to_json()))
+    np.testing.assert_array_equal(load_rod(tmp_path / "old.json")[0].binding.offset, ex.binding.offset)
+    npz.write_bytes(npz.read_bytes()[:100])
+    with pytest.raises(SketchRodGSError, match="rod.bindings.npz: not a readable .npz"):
+        load_rod(tmp_path / "rod.json")
+    npz.unlink()
+    with pytest.raises(SketchRodGSError, match="rod.bindings.npz: the rod file's bindings are missing"):
+        load_rod(tmp_path / "rod.json")
+    data = json.loads((tmp_path / "rod.json").read_text())
+    for bad, message in (({"file": "../x.npz", "count": 3}, "bindings.file"), ({"count": 3}, "bindings"),
+                         ({"file": "rod.bindings.npz", "count": 3, "format": 9}, "format 9")):
+        (tmp_path / "bad.json").write_text(json.dumps({**data, "bindings": bad}))
+        with pytest.raises(SketchRodGSError, match=message):
+            load_rod(tmp_path / "bad.json")
+    ex.save(tmp_path / "rod.json")
+    data["bindings"]["count"] += 1
+    (tmp_path / "bad.json").write_text(json.dumps(data))
+    with pytest.raises(SketchRodGSError, match="gaussian_ids_delta"):
+        load_rod(tmp_path / "bad.json")
 
 
 # ---- bad input ------------------------------------------------------------------------------

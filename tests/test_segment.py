@@ -123,10 +123,10 @@ def test_the_rod_file_keeps_which_gaussians_are_attached(tmp_path):
     extraction = extract_rod(scene, camera, uv, radius=R)
     assert extraction.binding.attached.sum() > 100
     extraction.save(tmp_path / "rod.json")
-    again = Extraction.from_json(json.loads((tmp_path / "rod.json").read_text()), "rod.json")
+    again = Extraction.from_json(json.loads((tmp_path / "rod.json").read_text()), "rod.json", folder=tmp_path)
     np.testing.assert_array_equal(again.binding.attached, extraction.binding.attached)
-    # a rod file from before attached parts reads as "nothing attached"
-    data = json.loads((tmp_path / "rod.json").read_text())
+    # a rod file from before attached parts (inline JSON bindings) reads as "nothing attached"
+    data = extraction.to_json()
     del data["binding"]["attached"]
     assert not Extraction.from_json(data, "old.json").binding.attached.any()
     data["binding"]["attached"] = [1]

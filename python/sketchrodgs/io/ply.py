@@ -36,21 +36,30 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
     (`rot_0` is w). Extra properties (normals, `transform`, ...) are ignored.
     """
     _check_header(path)
-    try:
-        data = plyfile.PlyData.read(os.fspath(path))
-    except Exception as exc:  # plyfile raises many types for bad bytes; name the file instead
-        raise SceneFormatError(f"{path}: malformed PLY ({type(exc).__name__}: {exc})") from None
-    names = [element.name for element in data.elements]
-    if "chunk" in names:  # PlayCanvas compressed PLY
-        from .compressed_ply import decode_compressed_ply
+    fast = _float_vertex_table(path)
+    if fast is not None:
+        names, gather = fast
+        columns = {name: i for i, name in enumerate(names)}
+    else:
+        try:
+            data = plyfile.PlyData.read(os.fspath(path))
+        except Exception as exc:  # plyfile raises many types for bad bytes; name the file instead
+            raise SceneFormatError(f"{path}: malformed PLY ({type(exc).__name__}: {exc})") from None
+        elements = [element.name for element in data.elements]
+        if "chunk" in elements:  # PlayCanvas compressed PLY
+            from .compressed_ply import decode_compressed_ply
 
-        return decode_compressed_ply(data, os.fspath(path))
-    if "vertex" not in names:
-        raise SceneFormatError(f"{path}: no 'vertex' element (elements: {', '.join(names) or 'none'})")
-    vertex = data["vertex"]
-    if vertex.count == 0:
-        raise SceneFormatError(f"{path}: the 'vertex' element has no rows")
-    columns = {prop.name: i for i, prop in enumerate(vertex.properties)}
+            return decode_compressed_ply(data, os.fspath(path))
+        if "vertex" not in elements:
+            raise SceneFormatError(f"{path}: no 'vertex' element (elements: {', '.join(elements) or 'none'})")
+        vertex = data["vertex"]
+        if vertex.count == 0:
+            raise SceneFormatError(f"{path}: the 'vertex' element has no rows")
+        columns = {prop.name: i for i, prop in enumerate(vertex.properties)}
+
+        def gather(*wanted: list[int]) -> list[np.ndarray]:
+            return [_gather_float32(vertex, w) for w in wanted]
+
     missing = [name for name in REQUIRED if name not in columns]
     if missing:
         raise SceneFormatError(f"{path}: missing vertex properties {', '.join(missing)}")
@@ -66,8 +75,7 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
     geometry = ["x", "y", "z", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3", "opacity"]
     try:
         # Two gathers, so that sh lands in its own contiguous array with no further copy.
-        values = _gather_float32(vertex, [columns[name] for name in geometry])
-        sh = _gather_float32(vertex, [columns[name] for row in sh_names for name in row])
+        values, sh = gather([columns[name] for name in geometry], [columns[name] for row in sh_names for name in row])
     except (ValueError, TypeError) as exc:
         raise SceneFormatError(f"{path}: vertex properties are not numeric ({exc})") from None
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
@@ -122,6 +130,60 @@ def _gather_float32(vertex: plyfile.PlyElement, columns: list[int]) -> np.ndarra
         return np.ascontiguousarray(table[:, columns], dtype=np.float32)
     names = records.dtype.names or ()
     return np.stack([records[names[i]].astype(np.float32) for i in columns], axis=1)
+
+
+# Rows read at a time by the float-table reader: bounds its buffer (16 MB at SH degree 3).
+_ROWS_PER_READ = 1 << 16
+_FLOAT_TYPES = {b"float", b"float32"}
+
+
+def _float_vertex_table(path: str | os.PathLike[str]):
+    """The common 3DGS layout, read without holding the file in memory: a binary PLY whose only
+    element is `vertex` with float32 properties. Returns (property names, gather) where
+    `gather(columns_a, columns_b, ...)` reads the file once, in blocks of rows, into one float32
+    array per column list; None for any other layout (plyfile then reads it)."""
+    with open(path, "rb") as stream:
+        head = stream.read(_HEADER_LIMIT)
+        size = os.fstat(stream.fileno()).st_size
+    end = head.find(b"end_header\n")
+    lines = head[:end].split(b"\n")
+    formats = {b"format binary_little_endian 1.0": "<f4", b"format binary_big_endian 1.0": ">f4"}
+    dtype = next((formats[line.strip()] for line in lines if line.strip() in formats), None)
+    elements = [line.split() for line in lines if line.startswith(b"element ")]
+    properties = [line.split() for line in lines if line.startswith(b"property ")]
+    if dtype is None or len(elements) != 1 or elements[0][1] != b"vertex" or not properties:
+        return None
+    if any(len(p) != 3 or p[1] not in _FLOAT_TYPES for p in properties):
+        return None
+    count, width = int(elements[0][2]), len(properties)
+    names = [p[2].decode("ascii", errors="replace") for p in properties]
+    start = end + len(b"end_header\n")
+    body = size - start
+    if count == 0:
+        raise SceneFormatError(f"{path}: the 'vertex' element has no rows")
+    if body != count * width * 4:
+        raise SceneFormatError(
+            f"{path}: the header says {count} vertex rows of {width * 4} bytes ({count * width * 4} bytes), "
+            f"but {body} bytes follow it ({'truncated' if body < count * width * 4 else 'data past the last row'})")
+
+    def gather(*wanted: list[int]) -> list[np.ndarray]:
+        outputs = [np.empty((count, len(w)), np.float32) for w in wanted]
+        buffer = np.empty(min(count, _ROWS_PER_READ) * width, np.dtype(dtype))
+        with open(path, "rb") as stream:
+            stream.seek(start)
+            for row in range(0, count, _ROWS_PER_READ):
+                rows = min(_ROWS_PER_READ, count - row)
+                block = buffer[: rows * width]
+                if stream.readinto(memoryview(block).cast("B")) != block.nbytes:
+                    raise SceneFormatError(f"{path}: file ended inside vertex row {row}")
+                table = block.reshape(rows, width)
+                if not table.dtype.isnative:
+                    table = table.astype(np.float32)
+                for out, w in zip(outputs, wanted):
+                    np.take(table, w, axis=1, out=out[row:row + rows])  # no temporary (fancy indexing makes one)
+        return outputs
+
+    return names, gather
 
 
 def _check_header(path: str | os.PathLike[str]) -> None:

@@ -53,12 +53,12 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
         for row in y0..=y1 {
             for col in x0..=x1 {
                 let p = row * image.width + col;
-                if image.index[p] < 0 {
+                if image.id_at(p) < 0 {
                     continue;
                 }
                 let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
                 let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
-                if (image.depth[p] - stroke.depth_at(i, t)).abs() > depth_gap {
+                if (image.depth(p) - stroke.depth_at(i, t)).abs() > depth_gap {
                     continue;
                 }
                 let (dx, dy) = (px - t * ab[0], py - t * ab[1]);

@@ -19,6 +19,8 @@
 //! assert_eq!(trace.pieces[0].gaussian_ids, (0..8).collect::<Vec<u32>>());
 //! ```
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 mod band;
 mod radius;
 mod search;
@@ -45,6 +47,8 @@ pub enum PathError {
     StrokeOnBackground,
     #[error("the stroke meets an object at only {samples} of its samples: draw it along the object, end to end")]
     StrokeBarelyOnObject { samples: usize },
+    #[error("rendered tiles: expected {grid_x}x{grid_y} tiles, got {tiles}")]
+    TileGrid { tiles: usize, grid_x: usize, grid_y: usize },
     #[error("parameter {name} must be finite and > 0, got {value}")]
     BadParameter { name: &'static str, value: f64 },
 }
@@ -55,11 +59,13 @@ pub struct IndexImage<'a> {
     pub width: usize,
     pub height: usize,
     /// Gaussian with the largest blending weight at each pixel, -1 where none.
-    pub index: &'a [i32],
+    index: &'a [i32],
     /// Camera z of that Gaussian.
-    pub depth: &'a [f32],
+    depth: &'a [f32],
     /// Accumulated opacity per pixel, if known: widths are measured where it is at least 0.5.
-    pub alpha: Option<&'a [f32]>,
+    alpha: Option<&'a [f32]>,
+    /// Where only part of the image was rendered: which tiles, and the record of reads outside.
+    rendered: Option<&'a Rendered>,
 }
 
 impl<'a> IndexImage<'a> {
@@ -69,7 +75,7 @@ impl<'a> IndexImage<'a> {
         if width == 0 || height == 0 || pixels != Some(index.len()) || pixels != Some(depth.len()) {
             return Err(PathError::ImageSize { width, height, index: index.len(), depth: depth.len() });
         }
-        Ok(Self { width, height, index, depth, alpha: None })
+        Ok(Self { width, height, index, depth, alpha: None, rendered: None })
     }
 
     /// Add the accumulated opacity image (same size), used to measure the object's width.
@@ -80,16 +86,56 @@ impl<'a> IndexImage<'a> {
         Ok(Self { alpha: Some(alpha), ..self })
     }
 
+    /// Say that only the tiles of `rendered` hold the render (the rest reads as background), so
+    /// that reads outside them are recorded in it.
+    pub fn with_rendered(self, rendered: &'a Rendered) -> Result<Self, PathError> {
+        if rendered.width != self.width || rendered.height != self.height {
+            return Err(PathError::ImageSize { width: rendered.width, height: rendered.height, index: self.index.len(), depth: self.depth.len() });
+        }
+        Ok(Self { rendered: Some(rendered), ..self })
+    }
+
+    /// Records a read of pixel `p` outside the rendered tiles.
+    #[inline]
+    fn note(&self, p: usize) {
+        self.known(p);
+    }
+
+    /// Whether pixel `p` was rendered; a read of one that was not is recorded.
+    #[inline]
+    pub(crate) fn known(&self, p: usize) -> bool {
+        self.rendered.is_none_or(|r| r.note(p))
+    }
+
+    /// The Gaussian index at pixel `p`, -1 where none.
+    #[inline]
+    pub(crate) fn id_at(&self, p: usize) -> i32 {
+        self.note(p);
+        self.index[p]
+    }
+
+    /// The camera z at pixel `p`.
+    #[inline]
+    pub(crate) fn depth(&self, p: usize) -> f32 {
+        self.note(p);
+        self.depth[p]
+    }
+
     /// Whether pixel `p` shows the object solidly: a Gaussian, and opacity >= 0.5 where known.
     #[inline]
     pub(crate) fn covered(&self, p: usize) -> bool {
-        self.index[p] >= 0 && self.alpha.is_none_or(|a| a[p] >= 0.5)
+        self.id_at(p) >= 0 && self.alpha.is_none_or(|a| a[p] >= 0.5)
     }
 
     /// Gaussian at pixel `p` (flat index), if any.
     #[inline]
     pub(crate) fn gaussian(&self, p: usize) -> Option<u32> {
-        u32::try_from(self.index[p]).ok()
+        u32::try_from(self.id_at(p)).ok()
+    }
+
+    /// The largest Gaussian index in the image (-1 when none).
+    pub(crate) fn max_id(&self) -> i32 {
+        self.index.iter().copied().max().unwrap_or(-1)
     }
 
     /// Flat pixel index of continuous coordinates, if inside the image.
@@ -100,6 +146,46 @@ impl<'a> IndexImage<'a> {
         } else {
             None
         }
+    }
+}
+
+/// Which square tiles of the image were rendered, for a search over a render of only part of the
+/// image (the band around a stroke). Every read outside them is recorded, so that the caller
+/// renders those tiles too and searches again: the result then equals a full render's.
+#[derive(Debug)]
+pub struct Rendered {
+    width: usize,
+    height: usize,
+    tile: usize,
+    grid_x: usize,
+    on: Vec<bool>,
+    missed: Vec<AtomicBool>,
+}
+
+impl Rendered {
+    /// `on` is row-major over the `ceil(width / tile) x ceil(height / tile)` grid of tiles.
+    pub fn new(width: usize, height: usize, tile: usize, on: Vec<bool>) -> Result<Self, PathError> {
+        let (grid_x, grid_y) = (width.div_ceil(tile.max(1)), height.div_ceil(tile.max(1)));
+        if tile == 0 || on.len() != grid_x * grid_y {
+            return Err(PathError::TileGrid { tiles: on.len(), grid_x, grid_y });
+        }
+        let missed = on.iter().map(|_| AtomicBool::new(false)).collect();
+        Ok(Self { width, height, tile, grid_x, on, missed })
+    }
+
+    /// Whether pixel `p` is rendered, recording it when not.
+    #[inline]
+    fn note(&self, p: usize) -> bool {
+        let tile = (p / self.width) / self.tile * self.grid_x + (p % self.width) / self.tile;
+        if !self.on[tile] {
+            self.missed[tile].store(true, Ordering::Relaxed);
+        }
+        self.on[tile]
+    }
+
+    /// The tiles read but not rendered (row-major, as `on`).
+    pub fn missed(&self) -> Vec<bool> {
+        self.missed.iter().map(|m| m.load(Ordering::Relaxed)).collect()
     }
 }
 
@@ -161,8 +247,8 @@ pub(crate) fn depth_gap(image: &IndexImage, stroke: &[[f32; 2]], radius: f32, fo
     let mut under: Vec<f32> = stroke
         .iter()
         .filter_map(|p| image.pixel_at(p[0], p[1]))
-        .filter(|&q| image.index[q] >= 0)
-        .map(|q| image.depth[q])
+        .filter(|&q| image.id_at(q) >= 0)
+        .map(|q| image.depth(q))
         .collect();
     if focal_px <= 0.0 || under.is_empty() {
         return 3.0 * radius;

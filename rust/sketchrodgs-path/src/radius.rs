@@ -32,7 +32,7 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
         .zip(&clean.points)
         .map(|(a, p)| {
             let a = (*a)?;
-            let under = image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q) && (image.depth[q] - image.depth[a]).abs() <= rough);
+            let under = image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q) && (image.depth(q) - image.depth(a)).abs() <= rough);
             under.or(Some(a).filter(|&q| image.covered(q)))
         })
         .collect();
@@ -45,7 +45,7 @@ fn half_widths(image: &IndexImage, stroke: &CleanStroke, pixels: &[Option<usize>
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
-        .map(|(p, &n)| 0.5 * cross_width(image, p, n, focal, max_px) as f32 * image.depth[p] / focal)
+        .map(|(p, &n)| 0.5 * cross_width(image, p, n, focal, max_px) as f32 * image.depth(p) / focal)
         .collect();
     (!values.is_empty()).then(|| median(&mut values))
 }

@@ -51,7 +51,8 @@ pub fn trace_stroke(
     params: &TraceParams,
 ) -> Result<Trace, PathError> {
     let params = params.validated(image.width)?;
-    if let Some(&id) = image.index.iter().find(|&&k| k >= 0 && k as usize >= centres.len()) {
+    let id = image.max_id();
+    if id >= 0 && id as usize >= centres.len() {
         return Err(PathError::IndexOutOfRange { id, count: centres.len() });
     }
     let gap = crate::depth_gap(image, stroke, params.radius, params.focal_px);
@@ -190,7 +191,7 @@ impl<'a> Search<'a> {
         let centre = band
             .pixel
             .iter()
-            .map(|&p| centres[image.index[p as usize] as usize].map(f64::from))
+            .map(|&p| centres[image.id_at(p as usize) as usize].map(f64::from))
             .collect();
         let n = band.len();
         let wide = wide_penalty(image, band, stroke, params);
@@ -242,7 +243,7 @@ impl<'a> Search<'a> {
                 let length2 = (ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2);
                 // a depth gap: never step onto another surface. Depth, not centre distance: on real
                 // captures neighbouring pixels' Gaussians can be big and far apart sideways.
-                let (za, zb) = (self.image.depth[pixel], self.image.depth[self.band.pixel[b] as usize]);
+                let (za, zb) = (self.image.depth(pixel), self.image.depth(self.band.pixel[b] as usize));
                 if (za - zb).abs() > self.gap {
                     continue;
                 }
@@ -286,7 +287,7 @@ fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &
         .map(|node| {
             let p = band.pixel[node] as usize;
             let excess = excess_width(image, p, stroke.normal[band.segment[node] as usize], focal, params.radius);
-            WIDE_WEIGHT * f64::from(excess) * f64::from(image.depth[p] / focal)
+            WIDE_WEIGHT * f64::from(excess) * f64::from(image.depth(p) / focal)
         })
         .collect()
 }

@@ -203,12 +203,12 @@ fn surfaces_near(
     for row in (cy - reach).max(0)..=(cy + reach).min(image.height as i64 - 1) {
         for col in (cx - reach).max(0)..=(cx + reach).min(image.width as i64 - 1) {
             let p = row as usize * image.width + col as usize;
-            if image.index[p] < 0 {
+            if image.id_at(p) < 0 {
                 continue;
             }
             let d = (col as f32 + 0.5 - point[0]).hypot(row as f32 + 0.5 - point[1]);
             if d <= reach_px.max(0.75) {
-                pixels.push((image.depth[p], d, p));
+                pixels.push((image.depth(p), d, p));
             }
         }
     }

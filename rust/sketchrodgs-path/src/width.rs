@@ -20,7 +20,7 @@ const MAX_MISSES: usize = 1;
 /// `max_px` each way (then the width is `2 * max_px + 1`).
 pub(crate) fn cross_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, max_px: usize) -> usize {
     let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
-    let z0 = image.depth[p];
+    let z0 = image.depth(p);
     let per_px = z0 / focal_px;
     let mut width = 1;
     for sign in [1.0_f32, -1.0] {
@@ -28,7 +28,12 @@ pub(crate) fn cross_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_
         for k in 1..=max_px {
             let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
             let Some(q) = image.pixel_at(x, y) else { break };
-            if image.covered(q) && (image.depth[q] - z0).abs() <= (SLOPE * k as f32).max(NOISE_PX) * per_px {
+            if !image.known(q) {
+                // not rendered (a render of the band only): walk on, so that one more render
+                // holds all this walk can read; this result is discarded
+                continue;
+            }
+            if image.covered(q) && (image.depth(q) - z0).abs() <= (SLOPE * k as f32).max(NOISE_PX) * per_px {
                 (run, misses) = (k, 0);
             } else {
                 // one stray Gaussian (a centre far off the surface) does not end the surface
@@ -51,7 +56,7 @@ pub(crate) const WIDE_CAP: f32 = 4.0;
 /// By how many radii the surface at pixel `p` is wider across `normal` than `WIDE_FROM` radii
 /// (0 to `WIDE_CAP`), for a part of radius `radius` seen at focal length `focal_px`.
 pub(crate) fn excess_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, radius: f32) -> f32 {
-    let radius_px = radius * focal_px / image.depth[p];
+    let radius_px = radius * focal_px / image.depth(p);
     let reach = ((WIDE_FROM + WIDE_CAP) * radius_px).ceil() as usize + 2;
     let width = cross_width(image, p, normal, focal_px, reach) as f32;
     (width / radius_px - WIDE_FROM).clamp(0.0, WIDE_CAP)

@@ -31,6 +31,23 @@ pub enum PolylineError {
     BadReach(f64),
 }
 
+/// Rows of `points` inside the axis-aligned box `[low, high]` (bounds included), ascending: the
+/// cheap first cut of every query around a rod on a scene of millions of Gaussians.
+pub fn rows_in_box(points: &[[f32; 3]], low: [f32; 3], high: [f32; 3]) -> Vec<u32> {
+    const ROWS_PER_TASK: usize = 1 << 16;
+    points
+        .par_chunks(ROWS_PER_TASK)
+        .enumerate()
+        .flat_map_iter(|(chunk, rows)| {
+            let start = chunk * ROWS_PER_TASK;
+            rows.iter().enumerate().filter_map(move |(k, p)| {
+                let inside = (0..3).all(|a| p[a] >= low[a] && p[a] <= high[a]);
+                inside.then_some((start + k) as u32)
+            })
+        })
+        .collect()
+}
+
 /// The nearest point of the polyline to a query point.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Nearest {
@@ -181,6 +198,17 @@ pub fn cross_section_centroids(
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn rows_in_box_are_those_inside_in_order() {
+        let points: Vec<[f32; 3]> = (0..200_000).map(|i| [(i % 100) as f32, (i / 100 % 50) as f32, f32::NAN.min(i as f32)]).collect();
+        let rows = super::rows_in_box(&points, [10.0, 5.0, -1.0], [12.0, 5.0, 1e9]);
+        let expected: Vec<u32> = (0..200_000u32).filter(|&i| (10..=12).contains(&(i % 100)) && i / 100 % 50 == 5).collect();
+        assert_eq!(rows, expected);
+        let nan = [[f32::NAN, 0.0, 0.0]];
+        assert!(super::rows_in_box(&nan, [-1.0; 3], [1.0; 3]).is_empty());
+    }
+
 
     /// The obvious answer: every segment, every point.
     fn brute(polyline: &[[f32; 3]], p: [f32; 3], reach: f64) -> Option<(u32, f32)> {

@@ -1,10 +1,10 @@
 //! Bindings for `sketchrodgs-path`: `_core.trace_stroke(...)`.
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use sketchrodgs_path::{IndexImage, PathError, PieceEnd, TraceParams};
+use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
 use crate::pool::run_parallel;
@@ -26,9 +26,11 @@ fn path_err(err: PathError) -> PyErr {
 /// `focal_px` is the camera's focal length in pixels (0: unknown); `alpha` (H, W) float32 or None.
 /// Returns {"pieces": [{"pixels": (P, 2) uint32 (col, row), "gaussian_ids": (G,) uint32,
 /// "reached_goal": bool, "lost_pixel": (col, row) | None, "lost_progress": float | None}],
-/// "clean_stroke": (M', 2) float32, "coverage": float}.
+/// "clean_stroke": (M', 2) float32, "coverage": float}. `rendered` (tiles, see `RenderedTiles`)
+/// says that only those 16x16 tiles were rendered; reads outside them are set in `missed`
+/// (same shape, bool), also when the trace fails.
 #[pyfunction]
-#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None))]
+#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None, rendered = None, missed = None))]
 #[allow(clippy::too_many_arguments)]
 fn trace_stroke<'py>(
     py: Python<'py>,
@@ -42,6 +44,8 @@ fn trace_stroke<'py>(
     cover_px: f32,
     focal_px: f32,
     alpha: Option<Bound<'py, PyArray2<f32>>>,
+    rendered: Option<Bound<'py, PyArray2<bool>>>,
+    missed: Option<Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (index, depth, centres, stroke) = (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
     let alpha = alpha.as_ref().map(|a| a.try_readonly()).transpose()?;
@@ -57,8 +61,11 @@ fn trace_stroke<'py>(
     let centres: &[[f32; 3]] = as_rows(contiguous(&centres, "centres")?);
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
     let params = TraceParams { radius, stroke_weight, band_px, cover_px, focal_px };
-    let trace = run_parallel(py, "trace_stroke", || sketchrodgs_path::trace_stroke(&image, centres, stroke, &params))?
-        .map_err(path_err)?;
+    let region = RegionArgs::new(rendered.as_ref(), missed.as_ref(), width, height)?;
+    let image = region.attach(image)?;
+    let trace = run_parallel(py, "trace_stroke", || sketchrodgs_path::trace_stroke(&image, centres, stroke, &params));
+    region.report()?;
+    let trace = trace?.map_err(path_err)?;
 
     let pieces = PyList::empty(py);
     for piece in trace.pieces {
@@ -93,9 +100,11 @@ fn trace_stroke<'py>(
 }
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
-/// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width.
+/// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width;
+/// `rendered` and `missed` as for `trace_stroke`.
 #[pyfunction]
-#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0))]
+#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None))]
+#[allow(clippy::too_many_arguments)]
 fn estimate_radius<'py>(
     py: Python<'py>,
     index: &Bound<'py, PyArray2<i32>>,
@@ -104,6 +113,8 @@ fn estimate_radius<'py>(
     stroke: &Bound<'py, PyArray2<f32>>,
     focal_px: f32,
     band_px: f32,
+    rendered: Option<Bound<'py, PyArray2<bool>>>,
+    missed: Option<Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<f32> {
     let (index, depth, alpha, stroke) = (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
     let (height, width) = (index.shape()[0], index.shape()[1]);
@@ -116,7 +127,62 @@ fn estimate_radius<'py>(
         .map_err(path_err)?;
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
     let params = TraceParams { band_px, focal_px, ..TraceParams::default() };
-    run_parallel(py, "estimate_radius", || sketchrodgs_path::estimate_radius(&image, stroke, &params))?.map_err(path_err)
+    let region = RegionArgs::new(rendered.as_ref(), missed.as_ref(), width, height)?;
+    let image = region.attach(image)?;
+    let radius = run_parallel(py, "estimate_radius", || sketchrodgs_path::estimate_radius(&image, stroke, &params));
+    region.report()?;
+    radius?.map_err(path_err)
+}
+
+/// Side of the tiles of `rendered` (the rasteriser's).
+const TILE: usize = 16;
+
+/// The `rendered` and `missed` arguments: the rendered tiles, and where to report reads outside.
+struct RegionArgs<'py> {
+    rendered: Option<Rendered>,
+    missed: Option<PyReadwriteArray2<'py, bool>>,
+}
+
+impl<'py> RegionArgs<'py> {
+    fn new(
+        rendered: Option<&Bound<'py, PyArray2<bool>>>,
+        missed: Option<&Bound<'py, PyArray2<bool>>>,
+        width: usize,
+        height: usize,
+    ) -> PyResult<Self> {
+        let (Some(rendered), Some(missed)) = (rendered, missed) else {
+            if rendered.is_some() || missed.is_some() {
+                return Err(SketchRodGSError::new_err("rendered and missed: give both or neither"));
+            }
+            return Ok(Self { rendered: None, missed: None });
+        };
+        let grid = [Some(height.div_ceil(TILE)), Some(width.div_ceil(TILE))];
+        let on = rendered.try_readonly()?;
+        check_shape("rendered", on.shape(), &grid)?;
+        let missed = missed.try_readwrite()?;
+        check_shape("missed", missed.shape(), &grid)?;
+        let on = contiguous(&on, "rendered")?.to_vec();
+        let rendered = Rendered::new(width, height, TILE, on).map_err(path_err)?;
+        Ok(Self { rendered: Some(rendered), missed: Some(missed) })
+    }
+
+    fn attach<'a>(&'a self, image: IndexImage<'a>) -> PyResult<IndexImage<'a>> {
+        match &self.rendered {
+            Some(r) => image.with_rendered(r).map_err(path_err),
+            None => Ok(image),
+        }
+    }
+
+    /// Write the reads outside the rendered tiles into `missed`.
+    fn report(mut self) -> PyResult<()> {
+        if let (Some(rendered), Some(missed)) = (&self.rendered, &mut self.missed) {
+            let out = missed.as_slice_mut().map_err(|_| SketchRodGSError::new_err("missed: must be C-contiguous"))?;
+            for (o, m) in out.iter_mut().zip(rendered.missed()) {
+                *o |= m;
+            }
+        }
+        Ok(())
+    }
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

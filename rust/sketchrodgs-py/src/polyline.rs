@@ -1,5 +1,5 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
-//! `_core.linked_components(...)`, `_core.linked_to(...)`, `_core.grow_part(...)`.
+//! `_core.linked_components(...)`, `_core.linked_to(...)`, `_core.grow_part(...)`, `_core.rows_in_box(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -33,6 +33,21 @@ fn nearest_on_polyline<'py>(
     let t: Vec<f32> = found.iter().map(|n| n.map_or(0.0, |n| n.t)).collect();
     let distance: Vec<f32> = found.iter().map(|n| n.map_or(f32::INFINITY, |n| n.distance)).collect();
     Ok((segment.into_pyarray(py), t.into_pyarray(py), distance.into_pyarray(py)))
+}
+
+/// Rows of `points` (N, 3) float32 inside the box [low, high] (bounds included), ascending int64.
+#[pyfunction]
+fn rows_in_box<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    low: [f32; 3],
+    high: [f32; 3],
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let points = points.try_readonly()?;
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let rows = run_parallel(py, "rows_in_box", || sketchrodgs_polyline::rows_in_box(points, low, high))?;
+    Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
 }
 
 /// Centroids of the cross-sections of `axis` (M, 3) float64 with unit `tangents` (M, 3) float64,
@@ -133,5 +148,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(linked_components, m)?)?;
     m.add_function(wrap_pyfunction!(linked_to, m)?)?;
     m.add_function(wrap_pyfunction!(grow_part, m)?)?;
+    m.add_function(wrap_pyfunction!(rows_in_box, m)?)?;
     Ok(())
 }

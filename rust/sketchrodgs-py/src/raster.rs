@@ -4,7 +4,7 @@ use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sketchrodgs_raster::{Camera, RasterError, RenderMode, RenderOptions, RenderOutput, Splats};
+use sketchrodgs_raster::{Camera, RasterError, RenderMode, RenderOptions, RenderOutput, Retained, Splats, TileMask};
 
 use crate::arrays::{check_shape, contiguous};
 use crate::pool::run_parallel;
@@ -20,8 +20,9 @@ fn raster_err(err: RasterError) -> PyErr {
 /// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a dict of numpy
 /// arrays (rgb (H, W, 3), alpha, depth, index (int32), index_depth, each (H, W);
 /// (rgb and depth are None when `index_only`), the stage timings in seconds and the visible/pair counts.
+/// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), index_only = false))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), index_only = false, tiles = None))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -39,6 +40,7 @@ fn rasterize<'py>(
     cy: f64,
     background: (f32, f32, f32),
     index_only: bool,
+    tiles: Option<&Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
     let (opacities, sh, w2c) = (opacities.try_readonly()?, sh.try_readonly()?, world_to_camera.try_readonly()?);
@@ -58,20 +60,122 @@ fn rasterize<'py>(
         sh.shape()[1],
     )
     .map_err(raster_err)?;
-    let m = contiguous(&w2c, "world_to_camera")?;
-    let mut matrix = [[0.0f64; 4]; 4];
-    for (row, values) in matrix.iter_mut().zip(m.chunks_exact(4)) {
-        row.copy_from_slice(values);
-    }
-    let camera = Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix };
-    let options = RenderOptions {
-        background: [background.0, background.1, background.2],
-        mode: if index_only { RenderMode::IndexOnly } else { RenderMode::Full },
-    };
+    let camera = camera_of(contiguous(&w2c, "world_to_camera")?, width, height, fx, fy, cx, cy);
+    let options = options_of(background, index_only);
 
-    let out = run_parallel(py, "rasterize", || sketchrodgs_raster::rasterize(&splats, &camera, &options))?;
+    let mask = match tiles {
+        None => None,
+        Some(tiles) => {
+            let tiles = tiles.try_readonly()?;
+            let (grid_x, grid_y) = camera.tile_grid();
+            check_shape("tiles", tiles.shape(), &[Some(grid_y as usize), Some(grid_x as usize)])?;
+            Some(TileMask::new(&camera, contiguous(&tiles, "tiles")?.to_vec()).map_err(raster_err)?)
+        }
+    };
+    let out = run_parallel(py, "rasterize", || match &mask {
+        None => sketchrodgs_raster::rasterize(&splats, &camera, &options),
+        Some(mask) => sketchrodgs_raster::rasterize_tiles(&splats, &camera, &options, mask),
+    })?;
     let out = out.map_err(raster_err)?;
     into_dict(py, out)
+}
+
+fn camera_of(w2c: &[f64], width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Camera {
+    let mut matrix = [[0.0f64; 4]; 4];
+    for (row, values) in matrix.iter_mut().zip(w2c.chunks_exact(4)) {
+        row.copy_from_slice(values);
+    }
+    Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix }
+}
+
+fn options_of(background: (f32, f32, f32), index_only: bool) -> RenderOptions {
+    RenderOptions {
+        background: [background.0, background.1, background.2],
+        mode: if index_only { RenderMode::IndexOnly } else { RenderMode::Full },
+    }
+}
+
+/// A render kept between the frames of an animation (see `sketchrodgs.frames`): built from the
+/// scene at rest and the rows that may move (int64); `frame(means, scales, quats)` renders the
+/// scene with those rows moved, re-blending only the tiles they touch, and returns the same dict
+/// as `rasterize`.
+#[pyclass(module = "sketchrodgs._core", name = "RetainedRender")]
+pub struct RetainedRender {
+    retained: Retained,
+}
+
+#[pymethods]
+impl RetainedRender {
+    #[new]
+    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), index_only = false))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        means: &Bound<'_, PyArray2<f32>>,
+        scales: &Bound<'_, PyArray2<f32>>,
+        quats: &Bound<'_, PyArray2<f32>>,
+        opacities: &Bound<'_, PyArray1<f32>>,
+        sh: &Bound<'_, PyArray3<f32>>,
+        world_to_camera: &Bound<'_, PyArray2<f64>>,
+        width: u32,
+        height: u32,
+        fx: f64,
+        fy: f64,
+        cx: f64,
+        cy: f64,
+        moving: &Bound<'_, PyArray1<i64>>,
+        background: (f32, f32, f32),
+        index_only: bool,
+    ) -> PyResult<Self> {
+        let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
+        let (opacities, sh, w2c, moving) =
+            (opacities.try_readonly()?, sh.try_readonly()?, world_to_camera.try_readonly()?, moving.try_readonly()?);
+        let n = means.shape()[0];
+        check_shape("means", means.shape(), &[None, Some(3)])?;
+        check_shape("scales", scales.shape(), &[Some(n), Some(3)])?;
+        check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
+        check_shape("opacities", opacities.shape(), &[Some(n)])?;
+        check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
+        check_shape("world_to_camera", w2c.shape(), &[Some(4), Some(4)])?;
+        let splats = Splats::from_flat(
+            contiguous(&means, "means")?,
+            contiguous(&scales, "scales")?,
+            contiguous(&quats, "quats")?,
+            contiguous(&opacities, "opacities")?,
+            contiguous(&sh, "sh")?,
+            sh.shape()[1],
+        )
+        .map_err(raster_err)?;
+        let rows = contiguous(&moving, "moving")?
+            .iter()
+            .map(|&r| u32::try_from(r).ok().filter(|&r| (r as usize) < n))
+            .collect::<Option<Vec<u32>>>()
+            .ok_or_else(|| SketchRodGSError::new_err(format!("moving: rows must be in 0..{n}")))?;
+        let camera = camera_of(contiguous(&w2c, "world_to_camera")?, width, height, fx, fy, cx, cy);
+        let options = options_of(background, index_only);
+        let retained = run_parallel(py, "RetainedRender", || Retained::new(&splats, &camera, &options, &rows))?
+            .map_err(raster_err)?;
+        Ok(Self { retained })
+    }
+
+    /// The frame with the moving rows of `means` (N, 3), `scales` (N, 3), `quats` (N, 4) float32.
+    fn frame<'py>(
+        &mut self,
+        py: Python<'py>,
+        means: &Bound<'py, PyArray2<f32>>,
+        scales: &Bound<'py, PyArray2<f32>>,
+        quats: &Bound<'py, PyArray2<f32>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
+        check_shape("means", means.shape(), &[None, Some(3)])?;
+        check_shape("scales", scales.shape(), &[None, Some(3)])?;
+        check_shape("quats", quats.shape(), &[None, Some(4)])?;
+        let (means, scales, quats) = (contiguous(&means, "means")?, contiguous(&scales, "scales")?, contiguous(&quats, "quats")?);
+        let retained = &mut self.retained;
+        let out = run_parallel(py, "RetainedRender.frame", || retained.frame_flat(means, scales, quats).cloned())?
+            .map_err(raster_err)?;
+        into_dict(py, out)
+    }
 }
 
 /// Moves the output buffers into numpy arrays without copying.
@@ -102,5 +206,6 @@ fn into_dict(py: Python<'_>, out: RenderOutput) -> PyResult<Bound<'_, PyDict>> {
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_class::<RetainedRender>()?;
     Ok(())
 }

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::project::{MIN_GAUSSIANS_PER_TASK, Splat2D, TileRect};
+use crate::tiles::TileMask;
 
 /// Most per-chunk tile counters kept in memory at once (chunks x tiles).
 const MAX_CHUNK_COUNTERS: usize = 1 << 22;
@@ -82,14 +83,15 @@ struct ChunkBins {
 }
 
 impl TileBins {
-    /// Bins the Gaussians `order` (front to back) into the tiles of their `rects`.
-    pub fn new(camera: &Camera, rects: &[TileRect], order: &[u32]) -> Self {
+    /// Bins the Gaussians `order` (front to back) into the tiles of their `rects` (only the tiles
+    /// of `mask`, when given).
+    pub fn new(camera: &Camera, rects: &[TileRect], order: &[u32], mask: Option<&TileMask>) -> Self {
         let (grid_x, grid_y) = camera.tile_grid();
         let n_tiles = (grid_x * grid_y) as usize;
         // Bound the counters' memory on very large images by using longer chunks.
         let max_chunks = (MAX_CHUNK_COUNTERS / n_tiles.max(1)).max(1);
         let chunk_len = GAUSSIANS_PER_CHUNK.max(order.len().div_ceil(max_chunks)).max(1);
-        let chunks = order.par_chunks(chunk_len).map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles)).collect();
+        let chunks = order.par_chunks(chunk_len).map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles, mask)).collect();
         Self { grid_x, grid_y, chunks }
     }
 
@@ -114,11 +116,13 @@ impl TileBins {
 }
 
 impl ChunkBins {
-    fn new(order: &[u32], rects: &[TileRect], grid_x: u32, n_tiles: usize) -> Self {
+    fn new(order: &[u32], rects: &[TileRect], grid_x: u32, n_tiles: usize, mask: Option<&TileMask>) -> Self {
         let tiles = |i: u32| {
             let r = rects.get(i as usize).copied().unwrap_or_default();
             let grid_x = grid_x as usize;
-            (r.y0..r.y1).flat_map(move |ty| (r.x0..r.x1).map(move |tx| usize::from(ty) * grid_x + usize::from(tx)))
+            (r.y0..r.y1)
+                .flat_map(move |ty| (r.x0..r.x1).map(move |tx| usize::from(ty) * grid_x + usize::from(tx)))
+                .filter(move |&t| mask.is_none_or(|m| m.contains(t)))
         };
         // Counting sort by tile, stable in depth order.
         let mut offsets = vec![0u32; n_tiles + 1];

@@ -9,7 +9,8 @@ use rayon::prelude::*;
 
 use crate::bin::TileBins;
 use crate::camera::Camera;
-use crate::project::Splat2D;
+use crate::project::{Projected, Splat2D};
+use crate::tiles::TileMask;
 use crate::simd::{F32x4, Mask4};
 use crate::{ALPHA_MAX, ALPHA_MIN, RenderMode, RenderOptions, RenderOutput, T_MIN, TILE_SIZE};
 
@@ -27,22 +28,70 @@ struct Band<'a> {
     index_depth: &'a mut [f32],
 }
 
-/// Blends the binned Gaussians into a [`RenderOutput`] (timings and counts left at zero).
-pub fn composite(camera: &Camera, splats: &[Splat2D], bins: &TileBins, options: &RenderOptions) -> RenderOutput {
+/// Where compositing finds a tile's Gaussians: per tile, lists of entries front to back, and per
+/// entry its projection and scene row.
+pub trait Source: Sync {
+    /// Tile `tile`'s entries, front to back, as consecutive slices.
+    fn lists(&self, tile: usize) -> impl Iterator<Item = &[u32]>;
+    /// The projection of entry `k`.
+    fn splat(&self, k: u32) -> Splat2D;
+    /// The scene row of entry `k`.
+    fn row(&self, k: u32) -> u32;
+}
+
+/// The Gaussians of one render: projected, and binned into tiles.
+pub struct Binned<'a> {
+    pub projected: &'a Projected,
+    pub bins: &'a TileBins,
+}
+
+impl Source for Binned<'_> {
+    fn lists(&self, tile: usize) -> impl Iterator<Item = &[u32]> {
+        self.bins.tile_lists(tile)
+    }
+
+    #[inline]
+    fn splat(&self, k: u32) -> Splat2D {
+        self.projected.splats.get(k as usize).copied().unwrap_or_default()
+    }
+
+    #[inline]
+    fn row(&self, k: u32) -> u32 {
+        self.projected.id(k as usize)
+    }
+}
+
+/// A new [`RenderOutput`] (timings and counts left at zero), background everywhere, with the
+/// tiles of `mask` (all when None) blended from `source`.
+pub fn composite<S: Source>(camera: &Camera, source: &S, options: &RenderOptions, mask: Option<&TileMask>) -> RenderOutput {
+    let mut out = blank(camera, options);
+    composite_into(&mut out, camera, source, options, mask);
+    out
+}
+
+/// An output of background only (index -1, alpha 0).
+pub fn blank(camera: &Camera, options: &RenderOptions) -> RenderOutput {
     let (width, height) = (camera.width as usize, camera.height as usize);
     let pixels = width * height;
     let with_color = options.mode == RenderMode::Full;
-    let color_len = |n: usize| if with_color { n } else { 0 };
-    let mut out = RenderOutput {
+    RenderOutput {
         width,
         height,
-        rgb: vec![0.0; color_len(pixels * 3)],
+        rgb: if with_color { options.background.repeat(pixels) } else { Vec::new() },
         alpha: vec![0.0; pixels], // transmittance is tracked in both modes, so alpha is free
-        depth: vec![0.0; color_len(pixels)],
+        depth: vec![0.0; if with_color { pixels } else { 0 }],
         index: vec![-1; pixels],
         index_depth: vec![0.0; pixels],
         ..RenderOutput::default()
-    };
+    }
+}
+
+/// Blends the tiles of `mask` (all when None) from `source` into `out` (made for `camera` and
+/// `options.mode`); other tiles are left as they are.
+pub fn composite_into<S: Source>(out: &mut RenderOutput, camera: &Camera, source: &S, options: &RenderOptions, mask: Option<&TileMask>) {
+    let (width, height) = (camera.width as usize, camera.height as usize);
+    let with_color = options.mode == RenderMode::Full;
+    let grid_x = camera.tile_grid().0 as usize;
     let n_bands = height.div_ceil(TILE);
     let band_rows = TILE * width;
     let mut rgb = split_bands(&mut out.rgb, band_rows * 3, n_bands).into_iter();
@@ -61,13 +110,12 @@ pub fn composite(camera: &Camera, splats: &[Splat2D], bins: &TileBins, options: 
     }
     let render_band = |band: Band| {
         if with_color {
-            render_band::<true>(band, width, height, splats, bins, options.background)
+            render_band::<true, S>(band, width, height, grid_x, source, options.background, mask)
         } else {
-            render_band::<false>(band, width, height, splats, bins, options.background)
+            render_band::<false, S>(band, width, height, grid_x, source, options.background, mask)
         }
     };
     bands.into_par_iter().with_max_len(1).for_each(render_band);
-    out
 }
 
 /// `n` consecutive chunks of `len` (the last shorter), or `n` empty slices for an unused output.
@@ -123,30 +171,35 @@ impl TileState {
     }
 }
 
-fn render_band<const COLOR: bool>(
+#[allow(clippy::too_many_arguments)]
+fn render_band<const COLOR: bool, S: Source>(
     band: Band,
     width: usize,
     height: usize,
-    splats: &[Splat2D],
-    bins: &TileBins,
+    grid_x: usize,
+    source: &S,
     background: [f32; 3],
+    mask: Option<&TileMask>,
 ) {
     let row0 = band.row0;
     let rows = TILE.min(height - row0);
     let tile_y = row0 / TILE;
     let mut state = TileState::new();
-    for tile_x in 0..bins.grid_x as usize {
+    for tile_x in 0..grid_x {
+        let tile = tile_y * grid_x + tile_x;
+        if mask.is_some_and(|m| !m.contains(tile)) {
+            continue;
+        }
         let col0 = tile_x * TILE;
         let cols = TILE.min(width - col0);
         let mut live = state.reset(cols, rows);
-        let tile = tile_y * bins.grid_x as usize + tile_x;
-        'lists: for list in bins.tile_lists(tile) {
+        'lists: for list in source.lists(tile) {
             for batch in list.chunks(BATCH) {
                 // Copy the batch first: the loads are independent, so their cache misses overlap
                 // instead of stalling the blend loop one by one.
                 let mut fetched = [Splat2D::default(); BATCH];
                 for (dst, &id) in fetched.iter_mut().zip(batch) {
-                    *dst = splats.get(id as usize).copied().unwrap_or_default();
+                    *dst = source.splat(id);
                 }
                 for (g, &id) in fetched.iter().zip(batch) {
                     live = live.saturating_sub(blend::<COLOR>(&mut state, g, id, col0, row0));
@@ -163,9 +216,12 @@ fn render_band<const COLOR: bool>(
                 let o = y * width + col0 + x;
                 let t = state.transmittance[y][gi][lane];
                 let id = state.max_id[y][gi][lane];
-                if let Some(g) = splats.get(id as usize) {
-                    band.index[o] = id as i32;
-                    band.index_depth[o] = g.depth;
+                if id == NO_GAUSSIAN {
+                    band.index[o] = -1;
+                    band.index_depth[o] = 0.0;
+                } else {
+                    band.index[o] = source.row(id) as i32;
+                    band.index_depth[o] = source.splat(id).depth;
                 }
                 let a = 1.0 - t;
                 band.alpha[o] = a;

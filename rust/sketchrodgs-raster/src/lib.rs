@@ -40,11 +40,15 @@ pub mod bin;
 pub mod camera;
 pub mod composite;
 pub mod project;
+pub mod retained;
 mod simd;
+pub mod tiles;
 #[cfg(test)]
 mod tests;
 
 pub use camera::{Camera, MAX_IMAGE_SIDE};
+pub use retained::Retained;
+pub use tiles::TileMask;
 
 /// Tiles are `TILE_SIZE x TILE_SIZE` pixels (INRIA's BLOCK_X = BLOCK_Y = 16).
 pub const TILE_SIZE: u32 = 16;
@@ -221,22 +225,43 @@ pub struct RenderOutput {
 /// Returns an error for a degenerate camera or inconsistent inputs; an empty scene, or one
 /// entirely behind the camera, renders as the background with index -1 everywhere.
 pub fn rasterize(splats: &Splats, camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, RasterError> {
+    render(splats, camera, options, None)
+}
+
+/// Renders only the tiles of `tiles`, each exactly as [`rasterize`] renders it; the rest of the
+/// image is background with index -1. Gaussians that cannot reach those tiles are dropped before
+/// their projection, so the cost follows the part of the image rendered.
+pub fn rasterize_tiles(
+    splats: &Splats,
+    camera: &Camera,
+    options: &RenderOptions,
+    tiles: &TileMask,
+) -> Result<RenderOutput, RasterError> {
+    let (grid_x, grid_y) = camera.tile_grid();
+    if tiles.grid() != (grid_x as usize, grid_y as usize) {
+        let (x, y) = tiles.grid();
+        return Err(RasterError::LengthMismatch { name: "tiles", expected: (grid_x * grid_y) as usize, got: x * y });
+    }
+    render(splats, camera, options, Some(tiles))
+}
+
+fn render(splats: &Splats, camera: &Camera, options: &RenderOptions, tiles: Option<&TileMask>) -> Result<RenderOutput, RasterError> {
     camera.validate()?;
     splats.validate()?;
     let with_color = options.mode == RenderMode::Full;
 
     let start = Instant::now();
-    let (projected, rects) = project::project(splats, camera, with_color);
+    let mut projected = project::project(splats, camera, with_color, tiles);
     let projected_at = Instant::now();
-    let order = bin::sort_by_depth(&projected, &rects);
-    let n_pairs: usize = order.iter().map(|&i| rects.get(i as usize).map_or(0, |r| r.area())).sum();
+    let order = bin::sort_by_depth(&projected.splats, &projected.rects);
+    let n_pairs: usize = order.iter().map(|&i| projected.rects.get(i as usize).map_or(0, |r| r.area())).sum();
     if n_pairs > MAX_TILE_PAIRS {
         return Err(RasterError::TooManyTilePairs(n_pairs));
     }
-    let bins = bin::TileBins::new(camera, &rects, &order);
-    drop(rects);
+    let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles);
+    projected.rects = Vec::new(); // compositing needs only the splats
     let sorted_at = Instant::now();
-    let mut out = composite::composite(camera, &projected, &bins, options);
+    let mut out = composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles);
     let end = Instant::now();
 
     out.n_visible = order.len();

@@ -5,6 +5,7 @@ use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, CameraF32};
+use crate::tiles::TileMask;
 use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
 
 /// Gaussians per rayon task in the per-Gaussian passes.
@@ -50,22 +51,167 @@ impl TileRect {
     }
 }
 
-/// Projects every Gaussian: entry i of both results is Gaussian i; a culled Gaussian gets an
-/// empty [`TileRect`] (and a default [`Splat2D`]).
-pub fn project(splats: &Splats, camera: &Camera, with_color: bool) -> (Vec<Splat2D>, Vec<TileRect>) {
+/// The projected Gaussians: `splats[k]` and `rects[k]` are Gaussian `ids[k]`, or Gaussian k when
+/// `ids` is None (then a culled Gaussian has an empty [`TileRect`] and a default [`Splat2D`]).
+#[derive(Debug, Default)]
+pub struct Projected {
+    pub ids: Option<Vec<u32>>,
+    pub splats: Vec<Splat2D>,
+    pub rects: Vec<TileRect>,
+}
+
+impl Projected {
+    /// From (row, projection, tiles) triples in row order.
+    pub fn from_found(found: Vec<(u32, Splat2D, TileRect)>) -> Self {
+        let mut ids = Vec::with_capacity(found.len());
+        let (mut splats, mut rects) = (Vec::with_capacity(found.len()), Vec::with_capacity(found.len()));
+        for (i, splat, rect) in found {
+            ids.push(i);
+            splats.push(splat);
+            rects.push(rect);
+        }
+        Self { ids: Some(ids), splats, rects }
+    }
+
+    /// The scene row of entry `k`.
+    #[inline]
+    pub fn id(&self, k: usize) -> u32 {
+        self.ids.as_ref().map_or(k as u32, |ids| ids[k])
+    }
+}
+
+/// Projects every Gaussian, or with `tiles` only those whose footprint reaches a tile of it (the
+/// others are dropped by a cheap bound on the footprint before the EWA projection).
+pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option<&TileMask>) -> Projected {
     let cam = CameraF32::new(camera);
     let k = splats.sh_coeffs;
-    let (mut projected, mut rects) = (Vec::new(), Vec::new());
-    (0..splats.len())
+    let one = |i: usize| {
+        let sh = if with_color { splats.sh.get(i * k * 3..(i + 1) * k * 3) } else { None };
+        project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, &cam, camera)
+    };
+    let Some(mask) = tiles else {
+        let (mut projected, mut rects) = (Vec::new(), Vec::new());
+        (0..splats.len())
+            .into_par_iter()
+            .with_min_len(MIN_GAUSSIANS_PER_TASK)
+            .map(|i| one(i).unwrap_or_default())
+            .unzip_into_vecs(&mut projected, &mut rects);
+        return Projected { ids: None, splats: projected, rects };
+    };
+    let reach = Reach::new(mask, &cam);
+    let found: Vec<(u32, Splat2D, TileRect)> = (0..splats.len())
         .into_par_iter()
-        .with_min_len(MIN_GAUSSIANS_PER_TASK)
-        .map(|i| {
-            let sh = if with_color { splats.sh.get(i * k * 3..(i + 1) * k * 3) } else { None };
-            project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, &cam, camera)
-                .unwrap_or_default()
+        .step_by(MIN_GAUSSIANS_PER_TASK)
+        .flat_map_iter(|start| {
+            let end = (start + MIN_GAUSSIANS_PER_TASK).min(splats.len());
+            let mut kept = Vec::new();
+            let mut may = [false; REACH_BLOCK];
+            for block in (start..end).step_by(REACH_BLOCK) {
+                let rows = block..(block + REACH_BLOCK).min(end);
+                reach.block(&splats.means[rows.clone()], &splats.scales[rows.clone()], &splats.opacities[rows.clone()], &mut may);
+                for (i, _) in rows.zip(may).filter(|(_, m)| *m) {
+                    if let Some((splat, rect)) = one(i).filter(|(_, rect)| mask.touches(rect)) {
+                        kept.push((i as u32, splat, rect));
+                    }
+                }
+            }
+            kept
         })
-        .unzip_into_vecs(&mut projected, &mut rects);
-    (projected, rects)
+        .collect();
+    Projected::from_found(found)
+}
+
+/// Projects every Gaussian (entry i is row i) and culls those whose `excluded` flag is set (the
+/// moving part of an animated scene): the static part, without a compacting copy.
+pub fn project_static(splats: &Splats, camera: &Camera, with_color: bool, excluded: &[bool]) -> Projected {
+    let mut projected = project(splats, camera, with_color, None);
+    for (rect, _) in projected.rects.iter_mut().zip(excluded).filter(|(_, e)| **e) {
+        *rect = TileRect::default();
+    }
+    projected
+}
+
+/// Gaussians tested together by [`Reach::block`] (straight-line code the compiler vectorises).
+const REACH_BLOCK: usize = 8;
+
+/// Whether a Gaussian can reach the rendered tiles, from its centre and largest scale only: a
+/// bound on the footprint [`project_one`] gives. The EWA covariance is `T R S² Rᵀ Tᵀ + 0.3 I`
+/// (T the Jacobian rows), so its largest eigenvalue is at most `max(S)² |J|²_F + 0.3`, the
+/// radius's `max(., 0.1)` adds at most `sqrt(0.1)`, and `|J|²_F <= K / z²` with K from the
+/// Jacobian's clamp limits. A relative margin and two pixels cover rounding.
+struct Reach<'a> {
+    mask: &'a TileMask,
+    cam: CameraF32,
+    /// sqrt(K) * 3 sigma
+    scale_to_px: f32,
+    /// 3 sigma * sqrt(0.62) + rounding
+    floor_px: f32,
+    /// The rendered tiles' pixel box (INRIA coordinates) grown by a tile: a footprint wholly
+    /// outside it reaches none of them.
+    pixel_box: [f32; 4],
+}
+
+impl<'a> Reach<'a> {
+    fn new(mask: &'a TileMask, cam: &CameraF32) -> Self {
+        let lim_x = cam.lim_x_neg.max(cam.lim_x_pos);
+        let lim_y = cam.lim_y_neg.max(cam.lim_y_pos);
+        let k = cam.fx * cam.fx * (1.0 + lim_x * lim_x) + cam.fy * cam.fy * (1.0 + lim_y * lim_y);
+        let tile = TILE_SIZE as f32;
+        let [x0, y0, x1, y1] = mask.tile_box().map(|t| t as f32 * tile);
+        Self {
+            mask,
+            cam: *cam,
+            scale_to_px: SIGMA_EXTENT * k.sqrt() * 1.001,
+            floor_px: SIGMA_EXTENT * (LOW_PASS + 0.32_f32).sqrt() * 1.001 + 2.0,
+            pixel_box: [x0 - tile, y0 - tile, x1 + tile, y1 + tile],
+        }
+    }
+
+    /// `may[k]`: whether Gaussian k of the block may reach a rendered tile (false: it cannot).
+    #[inline]
+    fn block(&self, means: &[Vec3], scales: &[Vec3], opacities: &[f32], may: &mut [bool; REACH_BLOCK]) {
+        let c = &self.cam;
+        let [bx0, by0, bx1, by1] = self.pixel_box;
+        let mut near = [false; REACH_BLOCK];
+        let (mut u, mut v, mut r) = ([0.0f32; REACH_BLOCK], [0.0f32; REACH_BLOCK], [0.0f32; REACH_BLOCK]);
+        for k in 0..means.len().min(REACH_BLOCK) {
+            let p = c.rotation * means[k] + c.translation;
+            let inv_z = 1.0 / p.z;
+            let s = scales[k].abs().max_element();
+            u[k] = c.fx * p.x * inv_z + c.cx - 0.5;
+            v[k] = c.fy * p.y * inv_z + c.cy - 0.5;
+            r[k] = self.scale_to_px * s * inv_z + self.floor_px;
+            // NaN anywhere fails a comparison, and the exact projection culls it too
+            near[k] = p.z > NEAR_PLANE && opacities[k] >= ALPHA_MIN;
+        }
+        for k in 0..REACH_BLOCK {
+            let inside = u[k] + r[k] >= bx0 && u[k] - r[k] <= bx1 && v[k] + r[k] >= by0 && v[k] - r[k] <= by1;
+            may[k] = k < means.len() && near[k] && (inside || !(u[k].is_finite() && v[k].is_finite() && r[k].is_finite()));
+            if may[k] && inside {
+                may[k] = self.mask.touches(&tile_rect_of(u[k], v[k], r[k], self.mask.grid()));
+            }
+        }
+    }
+}
+
+/// INRIA getRect: the tiles a footprint of `radius` px about (u, v) (INRIA pixel coordinates)
+/// overlaps; C truncation toward zero, then clamped to the grid.
+#[inline]
+fn tile_rect(u: f32, v: f32, radius: f32, camera: &Camera) -> TileRect {
+    let (grid_x, grid_y) = camera.tile_grid();
+    tile_rect_of(u, v, radius, (grid_x as usize, grid_y as usize))
+}
+
+#[inline]
+fn tile_rect_of(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -> TileRect {
+    let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
+    let trunc_clamp = |t: f32, max: usize| (t as i32).clamp(0, max as i32) as u16;
+    TileRect {
+        x0: trunc_clamp((u - radius) * tile_scale, grid_x),
+        y0: trunc_clamp((v - radius) * tile_scale, grid_y),
+        x1: trunc_clamp((u + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_x),
+        y1: trunc_clamp((v + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_y),
+    }
 }
 
 /// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted.
@@ -120,16 +266,7 @@ pub(crate) fn project_one(
     if !(mean2d[0].is_finite() && mean2d[1].is_finite() && radius.is_finite()) {
         return None;
     }
-    let (grid_x, grid_y) = camera.tile_grid();
-    let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
-    // INRIA getRect: C truncation toward zero, then clamp to the grid.
-    let trunc_clamp = |t: f32, max: u32| (t as i32).clamp(0, max as i32) as u16;
-    let mut rect = TileRect {
-        x0: trunc_clamp((mean2d[0] - radius) * tile_scale, grid_x),
-        y0: trunc_clamp((mean2d[1] - radius) * tile_scale, grid_y),
-        x1: trunc_clamp((mean2d[0] + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_x),
-        y1: trunc_clamp((mean2d[1] + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_y),
-    };
+    let mut rect = tile_rect(mean2d[0], mean2d[1], radius, camera);
     if rect.is_empty() {
         return None;
     }

@@ -123,10 +123,11 @@ fn equal_depths_blend_in_ascending_index_order() {
 fn tile_lists_hold_each_gaussian_in_its_rectangle_front_to_back() {
     let scene = Scene::random(3_000, 1, 4);
     let cam = camera(100, 70);
-    let (projected, rects) = project(&scene.splats(), &cam, true);
+    let projected = project(&scene.splats(), &cam, true, None);
+    let (projected, rects) = (projected.splats, projected.rects);
     let order = sort_by_depth(&projected, &rects);
     assert_eq!(order.len(), rects.iter().filter(|r| !r.is_empty()).count());
-    let bins = TileBins::new(&cam, &rects, &order);
+    let bins = TileBins::new(&cam, &rects, &order, None);
     assert_eq!(bins.len(), rects.iter().map(|r| r.area()).sum::<usize>());
     let mut seen = vec![0usize; rects.len()];
     for ty in 0..bins.grid_y as u16 {
@@ -199,4 +200,55 @@ fn huge_gaussians_covering_everything_are_fine() {
     assert_eq!(out.n_visible, 50);
     assert!(out.index.iter().all(|&i| i >= 0));
     assert!(out.rgb.iter().all(|c| c.is_finite()));
+}
+
+#[test]
+fn rendering_some_tiles_gives_exactly_the_full_render_there() {
+    // Gaussians of all sizes, some far off-screen, and masks from a single tile to all of them.
+    let mut scene = Scene::random(4_000, 4, 9);
+    scene.scales.iter_mut().step_by(97).for_each(|s| *s *= 20.0);
+    scene.means.iter_mut().step_by(13).for_each(|m| m.x *= 3.0);
+    let cam = camera(200, 150); // 13 x 10 tiles
+    let options = RenderOptions { background: [0.1, 0.2, 0.3], mode: RenderMode::Full };
+    let full = rasterize(&scene.splats(), &cam, &options).unwrap();
+    let (grid_x, grid_y) = cam.tile_grid();
+    let n_tiles = (grid_x * grid_y) as usize;
+    let masks: Vec<Vec<bool>> = vec![
+        (0..n_tiles).map(|t| t == 57).collect(),
+        (0..n_tiles).map(|t| (t / grid_x as usize + t % grid_x as usize) % 5 == 0).collect(),
+        (0..n_tiles).map(|t| t % grid_x as usize >= 11).collect(),
+        vec![true; n_tiles],
+    ];
+    for on in masks {
+        let mask = TileMask::new(&cam, on.clone()).unwrap();
+        for mode in [RenderMode::Full, RenderMode::IndexOnly] {
+            let part = rasterize_tiles(&scene.splats(), &cam, &RenderOptions { mode, ..options }, &mask).unwrap();
+            for p in 0..(cam.width * cam.height) as usize {
+                let (x, y) = (p % cam.width as usize, p / cam.width as usize);
+                let tile = y / 16 * grid_x as usize + x / 16;
+                if on[tile] {
+                    assert_eq!(part.index[p], full.index[p], "index at {x},{y}");
+                    assert_eq!(part.index_depth[p].to_bits(), full.index_depth[p].to_bits());
+                    assert_eq!(part.alpha[p].to_bits(), full.alpha[p].to_bits());
+                    if mode == RenderMode::Full {
+                        assert_eq!(part.rgb[p * 3..p * 3 + 3], full.rgb[p * 3..p * 3 + 3]);
+                        assert_eq!(part.depth[p].to_bits(), full.depth[p].to_bits());
+                    }
+                } else {
+                    assert_eq!((part.index[p], part.alpha[p]), (-1, 0.0));
+                    if mode == RenderMode::Full {
+                        assert_eq!(part.rgb[p * 3..p * 3 + 3], [0.1, 0.2, 0.3]);
+                    }
+                }
+            }
+            // the cheap bound dropped none that the exact footprint keeps
+            let reaching = project(&scene.splats(), &cam, false, None).rects.iter().filter(|r| mask.touches(r)).count();
+            assert_eq!(part.n_visible, reaching);
+        }
+    }
+    let wrong = TileMask::new(&camera(100, 70), vec![true; 35]).unwrap();
+    assert!(matches!(
+        rasterize_tiles(&scene.splats(), &cam, &options, &wrong),
+        Err(RasterError::LengthMismatch { name: "tiles", .. })
+    ));
 }
