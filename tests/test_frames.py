@@ -3,6 +3,10 @@ every frame of a real pull equals a full render of the same scene, and bad input
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -49,3 +53,22 @@ def test_bad_frames_are_refused(plant_animation):
         renderer.frame(animation.means[:-1], animation.scales, animation.quats)
     with pytest.raises(SketchRodGSError, match="Gaussians"):
         renderer.render(animation.rest_scene.subset(np.arange(5)))
+
+
+def test_frames_are_the_same_for_any_thread_count():
+    code = (
+        "import hashlib, sketchrodgs as s; from sketchrodgs.animate import Animation, Pull; "
+        "from sketchrodgs.frames import FrameRenderer; sc = s.load_scene(s.data.sample('plant')); "
+        "c, st = s.data.sample_camera('plant').resized(320, 180), s.data.sample_stroke('plant'); "
+        "a = Animation(sc, [s.extract_rod(sc, s.data.sample_camera('plant'), st)]); "
+        "r = FrameRenderer(a.rest_scene, c, a.moving_rows); h = hashlib.sha256(); "
+        "[h.update(r.frame(a.means, a.scales, a.quats).rgb.tobytes()) for f in a.frames(Pull(-1, (0, -0.05, 0), 0.1, 0, False, 0), 30)]; "
+        "print(h.hexdigest())"
+    )
+    digests = set()
+    for threads in ("1", "3"):
+        out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "SKETCHRODGS_NUM_THREADS": threads},
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        digests.add(out.stdout.strip())
+    assert len(digests) == 1
