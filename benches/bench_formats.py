@@ -15,8 +15,6 @@ split over the cores gains least.
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -105,38 +103,16 @@ def splat_breakdown(path: Path) -> list[list[object]]:
     ]
 
 
-_ONE_THREAD_GUNZIP = """
-import sys, time, numpy as np
-from sketchrodgs import _core
-from sketchrodgs.io._quantized import map_file
-raw, out = map_file(sys.argv[1]), np.empty(int(sys.argv[2]), dtype=np.uint8)
-best = float("inf")
-for _ in range(5):
-    start = time.perf_counter()
-    _core.gunzip_into(raw, out)
-    best = min(best, time.perf_counter() - start)
-print(best)
-"""
-
-
-def one_thread_gunzip_seconds(path: Path, size: int) -> float:
-    env = dict(os.environ, SKETCHRODGS_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, "-c", _ONE_THREAD_GUNZIP, str(path), str(size)], env=env,
-                         capture_output=True, text=True, check=True)
-    return float(out.stdout)
-
-
 def gzip_breakdown(path: Path) -> list[list[object]]:
-    """Stages of a gzipped SPZ load: inflation (libdeflate, in a part per core; stdlib zlib, one
-    core, for comparison), decoding into fresh arrays, validation."""
+    """Stages of a gzipped SPZ load: inflation (libdeflate, one call; stdlib zlib for comparison),
+    decoding into fresh arrays, validation."""
     raw = map_file(path)
-    header, payload = spz._inflate_gzipped(raw)
+    header, payload = spz._inflate_gzipped(raw, str(path))
     n, k = header.count, (min(header.sh_degree, 3) + 1) ** 2
     sh_bytes = 3 * spz.SH_DIM[header.sh_degree]
     inflated = np.empty(spz.LEGACY_HEADER.size + len(payload), dtype=np.uint8)
     inflate_s = best_time(lambda: _core.gunzip_into(raw, inflated), repeat=5)
     zlib_s = best_time(lambda: zlib.decompress(raw, wbits=31), repeat=3)
-    one_part_s = one_thread_gunzip_seconds(path, len(inflated))
 
     def decode() -> tuple[np.ndarray, ...]:
         arrays = empty_scene_arrays(n, k)
@@ -149,9 +125,7 @@ def gzip_breakdown(path: Path) -> list[list[object]]:
     total = best_time(lambda: load_scene(path), repeat=LOAD_REPEATS)
     mb = len(inflated) / 1e6
     return [
-        [f"inflate {mb:.0f} MB (libdeflate, {_core.num_threads()} parts)", f"{inflate_s * 1e3:.1f}", f"{mb / inflate_s:.0f} MB/s", f"{n / inflate_s / 1e6:.1f}"],
-        ["  the same in one part (SKETCHRODGS_NUM_THREADS=1)", f"{one_part_s * 1e3:.1f}", f"{mb / one_part_s:.0f} MB/s",
-         f"{n / one_part_s / 1e6:.1f}"],
+        [f"inflate {mb:.0f} MB (libdeflate, one call)", f"{inflate_s * 1e3:.1f}", f"{mb / inflate_s:.0f} MB/s", f"{n / inflate_s / 1e6:.1f}"],
         ["  the same with stdlib zlib, for scale", f"{zlib_s * 1e3:.1f}", f"{mb / zlib_s:.0f} MB/s", f"{n / zlib_s / 1e6:.1f}"],
         ["decode into fresh arrays (Rust, all cores)", f"{decode_s * 1e3:.1f}", "", ""],
         ["GaussianScene validation", f"{check_s * 1e3:.1f}", "", ""],
@@ -176,7 +150,7 @@ def main() -> None:
                 if fmt == "splat" and n == SIZES[-1]:
                     breakdown = splat_breakdown(path)
                 # the stages of the gzip cases that were slowest: random 8-bit SH at 1M (the most
-                # bytes to inflate), rounded SH at 100k (window markers live long, see gzip.rs)
+                # bytes to inflate), rounded SH at 100k (few distinct bytes)
                 if (label, n) in GZIP_STAGE_CASES:
                     gzip_stages.append((f"{label} load of {n:,} splats by stage", gzip_breakdown(path)))
                 path.unlink()

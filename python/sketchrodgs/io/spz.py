@@ -114,7 +114,7 @@ def decode_spz(raw: bytes | np.ndarray, source: str = "<spz>") -> GaussianScene:
         if start == MAGIC:
             header, payload = _inflate_v4(raw)
         elif start[:2] == GZIP_MAGIC:
-            header, payload = _inflate_gzipped(raw)
+            header, payload = _inflate_gzipped(raw, source)
         else:
             raise SceneFormatError(f"not an SPZ file (starts with {start!r}, not gzip or NGSP)")
         return _decode(header, payload)
@@ -144,8 +144,9 @@ def parse_header(magic: bytes, version: int, count: int, sh_degree: int, fractio
 # ---- inflating the attributes ---------------------------------------------------------------------
 
 
-def _inflate_gzipped(raw: np.ndarray) -> tuple[SpzHeader, np.ndarray]:
-    """Versions 2 and 3: one gzip stream holding the header and the attributes."""
+def _inflate_gzipped(raw: np.ndarray, source: str) -> tuple[SpzHeader, np.ndarray]:
+    """Versions 2 and 3: one gzip stream holding the header and the attributes. Bytes after the
+    gzip member are ignored, as gzip ignores them, with a warning."""
     header = _gzipped_header(raw)
     payload = header.payload_bytes()
     if payload > len(raw) * DEFLATE_MAX_RATIO:
@@ -159,14 +160,17 @@ def _inflate_gzipped(raw: np.ndarray) -> tuple[SpzHeader, np.ndarray]:
     room = MAX_EXTENSION_BYTES if header.flags & FLAG_EXTENSIONS else 0
     inflated = np.empty(LEGACY_HEADER.size + payload + room, dtype=np.uint8)
     try:
-        written = _core.gunzip_into(raw, inflated)
+        result = _core.gunzip_into(raw, inflated)
     except ValueError as exc:
         raise SceneFormatError(str(exc)) from None
-    if written is None:
+    if result is None:
         raise SceneFormatError(
             f"SPZ data continues past the {payload:,} bytes that {header.count:,} splats need "
             "(the count disagrees with the data)"
         )
+    written, trailing = result
+    if trailing:
+        logger.warning("%s: the file continues after its gzip member; the extra bytes were ignored", source)
     body = written - LEGACY_HEADER.size
     if body < payload:
         inside = _stream_at(header, body)

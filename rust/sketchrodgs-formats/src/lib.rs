@@ -12,9 +12,7 @@
 use rayon::prelude::*;
 
 pub mod compressed_ply;
-mod deflate;
 pub mod gzip;
-mod pages;
 pub mod splat;
 pub mod spz;
 pub mod summary;

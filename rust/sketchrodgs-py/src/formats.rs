@@ -14,16 +14,16 @@ fn formats_err(err: impl std::fmt::Display) -> PyErr {
     SketchRodGSError::new_err(err.to_string())
 }
 
-/// Inflate the gzip member in `raw` (uint8) into `out` (uint8). Returns the number of bytes
-/// written, or None when the stream holds more than `out` does.
+/// Inflate the gzip member in `raw` (uint8) into `out` (uint8). Returns (bytes written, whether
+/// bytes follow the member), or None when the stream holds more than `out` does.
 #[pyfunction]
-fn gunzip_into(py: Python<'_>, raw: &Bound<'_, PyArray1<u8>>, out: &Bound<'_, PyArray1<u8>>) -> PyResult<Option<usize>> {
+fn gunzip_into(py: Python<'_>, raw: &Bound<'_, PyArray1<u8>>, out: &Bound<'_, PyArray1<u8>>) -> PyResult<Option<(usize, bool)>> {
     let raw = raw.try_readonly()?;
     let mut out = out.try_readwrite()?;
     let raw = contiguous(&raw, "raw")?;
     let out = contiguous_mut(&mut out, "out")?;
     match run_parallel(py, "gunzip_into", || gzip::gunzip_into(raw, out))? {
-        Ok(written) => Ok(Some(written)),
+        Ok(inflated) => Ok(Some((inflated.written, inflated.trailing))),
         Err(gzip::GunzipError::TooLong(_)) => Ok(None),
         Err(error) => Err(formats_err(error)),
     }

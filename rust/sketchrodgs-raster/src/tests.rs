@@ -215,7 +215,7 @@ fn rendering_some_tiles_gives_exactly_the_full_render_there() {
     let n_tiles = (grid_x * grid_y) as usize;
     let masks: Vec<Vec<bool>> = vec![
         (0..n_tiles).map(|t| t == 57).collect(),
-        (0..n_tiles).map(|t| (t / grid_x as usize + t % grid_x as usize) % 5 == 0).collect(),
+        (0..n_tiles).map(|t| (t / grid_x as usize + t % grid_x as usize).is_multiple_of(5)).collect(),
         (0..n_tiles).map(|t| t % grid_x as usize >= 11).collect(),
         vec![true; n_tiles],
     ];
