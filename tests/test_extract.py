@@ -250,9 +250,17 @@ def test_bad_strokes_are_clear_errors(straight_scene, stroke, error, message):
         extract_rod(tubes.scene, CAMERA, np.asarray(stroke, np.float64), radius=0.01, render=images)
 
 
-@pytest.mark.parametrize("kwargs, message", [({"radius": 0.0}, "radius"), ({"radius": -1.0}, "radius"),
-                                             ({"radius": 0.01, "alpha": np.nan}, "alpha"),
-                                             ({"radius": 0.01, "band_px": -2.0}, "band_px")])
+@pytest.mark.parametrize("kwargs, message", [
+    ({"radius": 0.0}, "radius"), ({"radius": -1.0}, "radius"), ({"radius": 1e-300}, "radius: must be finite and at least"),
+    ({"radius": 1e-9}, "radius: 1e-09 would make .* vertices along the object .* at most 400,000"),
+    ({"radius": 0.01, "alpha": np.nan}, "alpha"), ({"radius": 0.01, "band_px": -2.0}, "band_px"),
+    # a tiny edge length would sample the rod into millions of vertices (and minutes, and gigabytes)
+    ({"radius": 0.01, "edge_length": 1e-9}, "edge_length: 1e-09 would make .* at most 100,000: give a larger edge_length"),
+    ({"radius": 0.01, "edge_length": 1e-300}, "edge_length: 1e-300 would make .*e\\+.* vertices"),
+    ({"radius": 0.01, "smoothing_iterations": 10**9}, "smoothing_iterations: must be a whole number in 0..1000"),
+    ({"radius": 0.01, "smoothing_iterations": -1}, "smoothing_iterations"),
+    ({"radius": 0.01, "smoothing_iterations": 2.5}, "smoothing_iterations"),
+])
 def test_bad_parameters_are_clear_errors(straight_scene, kwargs, message):
     tubes, images = straight_scene
     stroke = stroke_along(tubes.axes[0])

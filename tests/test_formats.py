@@ -446,6 +446,11 @@ def test_wrong_spz_versions_in_gzip(tmp_path, version, message):
     assert message in load_error(tmp_path, raw)
 
 
+def test_fractional_bits_past_the_24_bit_positions_are_refused(tmp_path):
+    for raw in (spz_gzip(small_blocks(), 30, 1, 3, fractional_bits=255), spz_v4(small_blocks(), 30, 1, fractional_bits=25)):
+        assert "positions are 24-bit fixed point, so at most 24" in load_error(tmp_path, raw)
+
+
 def test_wrong_spz_version_in_plain_header(tmp_path):
     raw = spz_v4(small_blocks(), 30, 1, version=3)
     assert "must be gzipped" in load_error(tmp_path, raw)

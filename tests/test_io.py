@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import numpy.lib.recfunctions
 import plyfile
 import pytest
 from conftest import DATA, random_scene
@@ -205,8 +206,47 @@ def test_splat_with_nan_position_names_row(tmp_path):
 
 
 def test_missing_file_is_a_clear_error(tmp_path):
-    with pytest.raises(SceneFormatError, match="cannot read"):
+    with pytest.raises(SceneFormatError, match="nope.ply: no such file"):
         load_scene(tmp_path / "nope.ply")
+    with pytest.raises(FileNotFoundError):  # also what Python code expects of a missing file
+        load_scene(tmp_path / "nope.ply")
+
+
+def test_errors_pickle_for_multiprocessing(tmp_path):
+    import pickle
+
+    from sketchrodgs.errors import PathNotFoundError, SceneFileNotFoundError, SimulationError, SketchRodGSError
+    for error in (SketchRodGSError("a"), PathNotFoundError("b"), SimulationError("c"), SceneFormatError("d"),
+                  SceneFileNotFoundError("e")):
+        again = pickle.loads(pickle.dumps(error))
+        assert type(again) is type(error) and str(again) == str(error)
+
+
+def test_counts_below_the_data_are_errors_not_partial_loads(tmp_path):
+    raw = ply_bytes(tmp_path)
+    fewer = raw.replace(b"element vertex 10", b"element vertex 9")
+    (tmp_path / "fewer.ply").write_bytes(fewer)
+    with pytest.raises(SceneFormatError, match="fewer.ply: the header says 9 vertex rows .*data past the last row"):
+        load_scene(tmp_path / "fewer.ply")
+    # the same through plyfile (a double property, so not the float-table reader)
+    scene = random_scene(10)
+    vertex = plyfile.PlyData.read(str(tmp_path / "ok.ply"))["vertex"].data
+    wide = np.lib.recfunctions.append_fields(vertex, "extra", np.zeros(10), dtypes="f8", usemask=False)
+    plyfile.PlyData([plyfile.PlyElement.describe(wide, "vertex")]).write(str(tmp_path / "wide.ply"))
+    assert len(load_scene(tmp_path / "wide.ply")) == len(scene)
+    widened = (tmp_path / "wide.ply").read_bytes().replace(b"element vertex 10", b"element vertex 9")
+    (tmp_path / "wide9.ply").write_bytes(widened)
+    with pytest.raises(SceneFormatError, match="wide9.ply: .* bytes after the last row the header declares"):
+        load_scene(tmp_path / "wide9.ply")
+    # ASCII: more rows than declared, and a file cut inside a number
+    plyfile.PlyData([plyfile.PlyElement.describe(vertex, "vertex")], text=True).write(str(tmp_path / "a.ply"))
+    text = (tmp_path / "a.ply").read_bytes()
+    (tmp_path / "a9.ply").write_bytes(text.replace(b"element vertex 10", b"element vertex 9"))
+    with pytest.raises(SceneFormatError, match="a9.ply: 10 rows of data but the header declares 9"):
+        load_scene(tmp_path / "a9.ply")
+    (tmp_path / "cut.ply").write_bytes(text.rstrip()[:-2])
+    with pytest.raises(SceneFormatError, match="cut.ply: the file ends inside a value"):
+        load_scene(tmp_path / "cut.ply")
 
 
 # ---- fuzz ---------------------------------------------------------------------------------------

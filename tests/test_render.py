@@ -372,6 +372,20 @@ def test_render_is_deterministic_across_runs_and_thread_counts():
         assert out.stdout.strip() == digest, f"{threads} threads gave a different image"
 
 
+def test_an_image_larger_than_memory_is_an_error_not_an_abort():
+    # under a 4 GB address-space limit, a 16384x16384 render (7.5 GB of outputs) must raise
+    code = (
+        "import resource, sketchrodgs as s; from sketchrodgs.render import render; "
+        "resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30)); "
+        "cam = s.Camera.look_at((0, 0, -2), (0, 0, 0), up=(0, 1, 0), width=16384, height=16384, fov_y_deg=40)\n"
+        "try:\n    render(s.load_scene(s.data.sample('ring')), cam)\n"
+        "except s.SketchRodGSError as e:\n    print(e)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "the image needs 7.52 GB, more memory than can be had: render a smaller image" in out.stdout
+
+
 def test_render_releases_the_gil():
     scene, cam = plant_scene(), plant_camera(1920, 1080)
     render(scene, cam)  # warm up

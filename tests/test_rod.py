@@ -228,6 +228,36 @@ def test_degenerate_polylines_are_rejected_with_their_position_or_merged():
         Rod(straight(4), radius=-1.0)
     with pytest.raises(SimulationError, match="out of range"):
         Rod(straight(4)).clamp(4)
+    with pytest.raises(SimulationError, match="edge 0 has an infinite length: the coordinates are too large"):
+        Rod([[-1e308, 0, 0], [1e308, 0, 0]])
+    with pytest.raises(SimulationError, match="polyline: 100,001 vertices, more than a rod may have"):
+        Rod(straight(100_001))
+    rod = Rod(straight(4))
+    with pytest.raises(SimulationError, match=r"rotation: not a rotation matrix .* det 8\.0"):
+        rod.transform(2 * np.eye(3))
+
+
+def test_a_held_vertex_is_not_grabbed_and_a_world_is_not_shared_across_threads():
+    import threading
+
+    rod = Rod(straight(400))
+    rod.clamp(0)
+    rod.pin(-1)
+    for vertex, held in ((0, "clamped"), (-1, "pinned")):
+        with pytest.raises(SimulationError, match=f"vertex {vertex % 400} is {held}: set it free before grabbing it"):
+            rod.grab(vertex, (0.0, 0.1, 0.0))
+    rod.free(-1)
+    rod.grab(-1, (1.0, 0.1, 0.0))
+    errors: list[str] = []
+    stepping = threading.Thread(target=lambda: [rod.step(DT) for _ in range(40)])
+    stepping.start()
+    while stepping.is_alive():
+        try:
+            rod.positions
+        except SimulationError as err:
+            errors.append(str(err))
+    stepping.join()
+    assert errors and "not shared across threads" in errors[0]
 
 
 def test_coincident_non_adjacent_vertices_are_fine():

@@ -7,6 +7,7 @@ left to spring back for `settle` seconds.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -19,6 +20,8 @@ from .rod import Rod, RodParams, World
 from .scene import GaussianScene
 from .rig import DEFAULT_END_RAMP, Rig
 from .skin import skin_into
+
+logger = logging.getLogger("sketchrodgs")
 
 
 @dataclass(frozen=True)
@@ -144,6 +147,11 @@ class Animation:
         rod = self.rods[pull.rod]
         if not -rod.num_vertices <= pull.vertex < rod.num_vertices:
             raise SketchRodGSError(f"grab vertex: {pull.vertex} is outside the rod's {rod.num_vertices} vertices")
+        held = rod.boundaries[pull.vertex]
+        if held != "free":
+            # a grab moves the vertex, so it cannot stay held: let go of it, and say so
+            logger.warning("rod %d: vertex %d is %s; it is set free to be pulled", pull.rod, pull.vertex, held)
+            rod.free(pull.vertex)
         start = np.array(rod.positions[pull.vertex], np.float64)
         offset = np.array(pull.offset)
         dt = 1.0 / fps

@@ -1,6 +1,8 @@
-"""The exceptions sketchrodgs raises. All subclass `ValueError`.
+"""The exceptions sketchrodgs raises. All subclass `ValueError`, and all pickle (they cross
+`multiprocessing`).
 
-The base classes are defined in the compiled core so that Rust and Python raise the same types.
+The base classes are defined in the compiled core (`sketchrodgs._core`) so that Rust and Python
+raise the same types.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from ._core import PathNotFoundError, SimulationError, SketchRodGSError
 __all__ = [
     "CameraError",
     "PathNotFoundError",
+    "SceneFileNotFoundError",
     "SceneFormatError",
     "SimulationError",
     "SketchRodGSError",
@@ -18,6 +21,10 @@ __all__ = [
 
 class SceneFormatError(SketchRodGSError):
     """A scene file or scene array is malformed. The message names the file or field."""
+
+
+class SceneFileNotFoundError(SceneFormatError, FileNotFoundError):
+    """A scene file that does not exist (also a `FileNotFoundError`)."""
 
 
 class CameraError(SketchRodGSError):

@@ -23,9 +23,12 @@ from .errors import PathNotFoundError, SketchRodGSError
 from .jsonfile import read_json
 from .partial_render import MARGIN_PX, PartialRender, band_tiles
 from .render import RenderResult
+from .rod import MAX_ROD_VERTICES
 from .scene import GaussianScene
 
 DEFAULT_SMOOTHING_ITERATIONS = 10
+_SMALLEST = float(np.finfo(np.float32).tiny)  # lengths go to Rust as float32
+MAX_SMOOTHING_ITERATIONS = 1000  # far past any use: smoothing converges to a straight line
 # A path Gaussian's centre must project within this many pixels, or radii, of its path pixel.
 _NEAR_PIXEL_PX = 3.0
 _NEAR_PIXEL_RADII = 2.0
@@ -267,14 +270,18 @@ def extract_rod(
     for name, value in (("alpha", alpha), ("segment_scale", segment_scale)):
         if not np.isfinite(value) or value < 0:
             raise SketchRodGSError(f"{name}: must be finite and >= 0, got {value}")
-    if radius is not None and not (np.isfinite(radius) and radius > 0):
-        raise SketchRodGSError(f"radius: must be finite and > 0, got {radius}")
+    if radius is not None and not (np.isfinite(radius) and radius >= _SMALLEST):
+        raise SketchRodGSError(f"radius: must be finite and at least {_SMALLEST:g}, got {radius}")
     if band_px is not None and not (np.isfinite(band_px) and band_px > 0):
         raise SketchRodGSError(f"band_px: must be finite and > 0, got {band_px}")
     if attach_size is not None and not (np.isfinite(attach_size) and attach_size > 0):
         raise SketchRodGSError(f"attach_size: must be finite and > 0, got {attach_size}")
     if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
         raise SketchRodGSError(f"edge_length: must be finite and > 0, got {edge_length}")
+    if (isinstance(smoothing_iterations, bool) or not isinstance(smoothing_iterations, (int, np.integer))
+            or not 0 <= smoothing_iterations <= MAX_SMOOTHING_ITERATIONS):
+        raise SketchRodGSError(
+            f"smoothing_iterations: must be a whole number in 0..{MAX_SMOOTHING_ITERATIONS}, got {smoothing_iterations!r}")
 
     partial = None
     if render is None:
@@ -314,6 +321,7 @@ def extract_rod(
             f"radius {radius:.3g}): draw the stroke along more of the object, or give a smaller --radius",
             stroke, pixel_path, pieces)
     # Recentre on a uniform sampling at half the radius, then smooth and resample to the edge length.
+    _check_vertex_count("radius", pl.polyline_length(points), radius / 2, radius, 4 * MAX_ROD_VERTICES)
     points = pl.resample(points, radius / 2)
     if recentre:
         nearby = scene.means[pl.near_box(points, scene.means, 2.5 * radius)]
@@ -321,6 +329,7 @@ def extract_rod(
     points = pl.laplacian_smooth(points, smoothing_iterations)
     length = pl.polyline_length(points)
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
+    _check_vertex_count("edge_length", length, spacing, spacing, MAX_ROD_VERTICES)
     polyline = pl.resample(points, spacing)
     if flip:
         polyline, path_ids = polyline[::-1].copy(), path_ids[::-1].copy()
@@ -422,6 +431,16 @@ def _search_inputs(render: RenderResult, stroke: np.ndarray) -> tuple[np.ndarray
     flip = _flipped(stroke)
     work = np.ascontiguousarray(stroke[::-1] if flip else stroke, np.float32)
     return index, depth, opacity, work, flip
+
+
+def _check_vertex_count(name: str, length: float, spacing: float, value: float, most: int) -> None:
+    """Refuse a spacing that would sample the object's `length` into more than `most` points."""
+    with np.errstate(over="ignore", divide="ignore"):
+        count = np.float64(length) / np.float64(spacing) + 1
+    if not count <= most:
+        shown = f"{count:,.0f}" if count < 1e12 else f"{count:.3g}"
+        raise SketchRodGSError(f"{name}: {value:g} would make {shown} vertices along the object ({length:.3g} long); "
+                               f"at most {most:,}: give a larger {name}")
 
 
 def _flipped(stroke: np.ndarray) -> bool:

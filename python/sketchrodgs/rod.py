@@ -173,6 +173,18 @@ def _points(a: npt.ArrayLike, name: str) -> np.ndarray:
     return arr
 
 
+# The most vertices a rod may have (docs/extraction.md): a 1000-vertex rod steps in ~2 ms; 100k
+# vertices is already a minute's simulation per second of motion.
+MAX_ROD_VERTICES = 100_000
+
+
+def _rod_points(polyline: npt.ArrayLike) -> np.ndarray:
+    points = _points(polyline, "polyline")
+    if len(points) > MAX_ROD_VERTICES:
+        raise SimulationError(f"polyline: {len(points):,} vertices, more than a rod may have ({MAX_ROD_VERTICES:,})")
+    return points
+
+
 def _vec3(v: npt.ArrayLike, name: str) -> tuple[float, float, float]:
     arr = np.asarray(v, dtype=np.float64).reshape(-1)
     if arr.shape != (3,):
@@ -211,15 +223,38 @@ def merge_coincident(polyline: npt.ArrayLike, tol: float | None = None) -> tuple
     return p[keep].copy(), index
 
 
+class _OneThreadAtATime:
+    """The Rust world, whose calls raise a clear error where two threads use it at once (a step
+    releases the GIL, and Rust refuses a second borrow of the world meanwhile)."""
+
+    def __init__(self, world: Any) -> None:
+        self._world = world
+
+    def __getattr__(self, name: str) -> Any:
+        method = getattr(self._world, name)
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return method(*args, **kwargs)
+            except RuntimeError as exc:
+                if "borrowed" not in str(exc):
+                    raise
+                raise SimulationError(f"{name}: this World (and its rods) is in use by another thread; a World is "
+                                      "not shared across threads: give each thread its own, or hold a lock") from None
+
+        return call
+
+
 class World:
-    """Rods stepped together (no rod-rod contact).
+    """Rods stepped together (no rod-rod contact). A World and its rods belong to one thread at a
+    time: a call while another thread steps it raises `SimulationError`.
 
     Args:
         solver: solver settings shared by the rods.
     """
 
     def __init__(self, solver: SolverSettings | None = None) -> None:
-        self._core = _core.RodWorld()
+        self._core = _OneThreadAtATime(_core.RodWorld())
         self._rods: list[Rod] = []
         if solver is not None:
             self.solver = solver
@@ -312,7 +347,7 @@ class Rod:
         self._world = world if world is not None else World()
         p = params
         self._index: int | None = self._world._core.add_rod(
-            _points(polyline, "polyline"),
+            _rod_points(polyline),
             float(p.radius),
             float(p.youngs_modulus),
             None if p.shear_modulus is None else float(p.shear_modulus),

@@ -12,7 +12,7 @@ import os
 import zlib
 from pathlib import Path
 
-from ..errors import SceneFormatError
+from ..errors import SceneFileNotFoundError, SceneFormatError
 from ..scene import GaussianScene
 from . import compressed_ply, ply, splat, spz
 
@@ -45,6 +45,8 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     try:
         with open(path, "rb") as stream:
             head = stream.read(_HEAD_BYTES)
+    except FileNotFoundError:
+        raise SceneFileNotFoundError(f"{path}: no such file") from None
     except OSError as exc:
         raise SceneFormatError(f"{path}: cannot read ({exc.strerror})") from None
     if head[:4] in (b"ply\n", b"ply\r"):

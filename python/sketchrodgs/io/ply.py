@@ -45,6 +45,7 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
             data = plyfile.PlyData.read(os.fspath(path))
         except Exception as exc:  # plyfile raises many types for bad bytes; name the file instead
             raise SceneFormatError(f"{path}: malformed PLY ({type(exc).__name__}: {exc})") from None
+        _check_body(path, data)
         elements = [element.name for element in data.elements]
         if "chunk" in elements:  # PlayCanvas compressed PLY
             from .compressed_ply import decode_compressed_ply
@@ -151,8 +152,10 @@ def _float_vertex_table(path: str | os.PathLike[str]):
     dtype = next((formats[line.strip()] for line in lines if line.strip() in formats), None)
     elements = [line.split() for line in lines if line.startswith(b"element ")]
     properties = [line.split() for line in lines if line.startswith(b"property ")]
-    if dtype is None or len(elements) != 1 or elements[0][1] != b"vertex" or not properties:
+    if end < 0 or dtype is None or len(elements) != 1 or elements[0][1:2] != [b"vertex"] or not properties:
         return None
+    if len(elements[0]) != 3 or not elements[0][2].isdigit():
+        return None  # plyfile names what is wrong
     if any(len(p) != 3 or p[1] not in _FLOAT_TYPES for p in properties):
         return None
     count, width = int(elements[0][2]), len(properties)
@@ -184,6 +187,31 @@ def _float_vertex_table(path: str | os.PathLike[str]):
         return outputs
 
     return names, gather
+
+
+def _check_body(path: str | os.PathLike[str], data: plyfile.PlyData) -> None:
+    """What plyfile lets pass: rows past the header's counts, and an ASCII file cut inside a number."""
+    with open(path, "rb") as stream:
+        raw = stream.read()
+    end = raw.find(b"end_header")
+    start = raw.index(b"\n", end) + 1 if end >= 0 and b"\n" in raw[end:] else len(raw)
+    body = raw[start:]
+    if data.text:
+        if body and not body[-1:].isspace():
+            raise SceneFormatError(f"{path}: the file ends inside a value (truncated): '{body[-20:].decode(errors='replace')}'")
+        rows = sum(1 for line in body.splitlines() if line.strip())
+        expected = sum(element.count for element in data.elements)
+        if rows > expected:
+            raise SceneFormatError(f"{path}: {rows} rows of data but the header declares {expected} "
+                                   "(its counts are below the data)")
+        return
+    sizes = [[0 if isinstance(prop, plyfile.PlyListProperty) else np.dtype(prop.val_dtype).itemsize
+              for prop in element.properties] for element in data.elements]
+    if all(all(sizes_) for sizes_ in sizes):  # fixed-size rows only
+        expected = sum(element.count * sum(row) for element, row in zip(data.elements, sizes))
+        if len(body) > expected:
+            raise SceneFormatError(f"{path}: {len(body) - expected} bytes after the last row the header declares "
+                                   "(its counts are below the data)")
 
 
 def _check_header(path: str | os.PathLike[str]) -> None:

@@ -50,6 +50,7 @@ from ..scene import GaussianScene, sh_coefficient_count
 from ._quantized import empty_scene_arrays, map_file
 
 logger = logging.getLogger("sketchrodgs")
+MAX_FRACTIONAL_BITS = 24
 
 MAGIC = b"NGSP"
 GZIP_MAGIC = b"\x1f\x8b"
@@ -138,6 +139,11 @@ def parse_header(magic: bytes, version: int, count: int, sh_degree: int, fractio
         )
     if sh_degree not in SH_DIM:
         raise SceneFormatError(f"unsupported SH degree {sh_degree} (SPZ allows 0 to 4)")
+    if fractional_bits > MAX_FRACTIONAL_BITS:
+        # positions are 24-bit fixed point: more fractional bits than that put every one near 0
+        raise SceneFormatError(
+            f"fractionalBits {fractional_bits}: positions are 24-bit fixed point, so at most {MAX_FRACTIONAL_BITS} "
+            "(the reference writer uses 12)")
     return SpzHeader(version, count, sh_degree, fractional_bits, flags)
 
 

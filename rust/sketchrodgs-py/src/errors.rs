@@ -5,9 +5,9 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-create_exception!(_core, SketchRodGSError, PyValueError, "Base class of every sketchrodgs error.");
-create_exception!(_core, PathNotFoundError, SketchRodGSError, "The stroke did not lead to a usable path.");
-create_exception!(_core, SimulationError, SketchRodGSError, "The rod simulation could not proceed.");
+create_exception!(sketchrodgs._core, SketchRodGSError, PyValueError, "Base class of every sketchrodgs error.");
+create_exception!(sketchrodgs._core, PathNotFoundError, SketchRodGSError, "The stroke did not lead to a usable path.");
+create_exception!(sketchrodgs._core, SimulationError, SketchRodGSError, "The rod simulation could not proceed.");
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();

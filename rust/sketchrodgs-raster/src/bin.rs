@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::project::{MIN_GAUSSIANS_PER_TASK, Splat2D, TileRect};
 use crate::tiles::TileMask;
+use crate::{RasterError, try_filled};
 
 /// Most per-chunk tile counters kept in memory at once (chunks x tiles).
 const MAX_CHUNK_COUNTERS: usize = 1 << 22;
@@ -84,15 +85,16 @@ struct ChunkBins {
 
 impl TileBins {
     /// Bins the Gaussians `order` (front to back) into the tiles of their `rects` (only the tiles
-    /// of `mask`, when given).
-    pub fn new(camera: &Camera, rects: &[TileRect], order: &[u32], mask: Option<&TileMask>) -> Self {
+    /// of `mask`, when given); an error where the lists do not fit in memory.
+    pub fn new(camera: &Camera, rects: &[TileRect], order: &[u32], mask: Option<&TileMask>) -> Result<Self, RasterError> {
         let (grid_x, grid_y) = camera.tile_grid();
         let n_tiles = (grid_x * grid_y) as usize;
         // Bound the counters' memory on very large images by using longer chunks.
         let max_chunks = (MAX_CHUNK_COUNTERS / n_tiles.max(1)).max(1);
         let chunk_len = GAUSSIANS_PER_CHUNK.max(order.len().div_ceil(max_chunks)).max(1);
-        let chunks = order.par_chunks(chunk_len).map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles, mask)).collect();
-        Self { grid_x, grid_y, chunks }
+        let chunks =
+            order.par_chunks(chunk_len).map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles, mask)).collect::<Result<_, _>>()?;
+        Ok(Self { grid_x, grid_y, chunks })
     }
 
     /// Total number of (tile, Gaussian) pairs.
@@ -116,7 +118,7 @@ impl TileBins {
 }
 
 impl ChunkBins {
-    fn new(order: &[u32], rects: &[TileRect], grid_x: u32, n_tiles: usize, mask: Option<&TileMask>) -> Self {
+    fn new(order: &[u32], rects: &[TileRect], grid_x: u32, n_tiles: usize, mask: Option<&TileMask>) -> Result<Self, RasterError> {
         let tiles = |i: u32| {
             let r = rects.get(i as usize).copied().unwrap_or_default();
             let grid_x = grid_x as usize;
@@ -125,7 +127,7 @@ impl ChunkBins {
                 .filter(move |&t| mask.is_none_or(|m| m.contains(t)))
         };
         // Counting sort by tile, stable in depth order.
-        let mut offsets = vec![0u32; n_tiles + 1];
+        let mut offsets = try_filled(n_tiles + 1, 0u32, "tile lists")?;
         for &i in order {
             for t in tiles(i) {
                 offsets[t + 1] += 1;
@@ -135,14 +137,14 @@ impl ChunkBins {
             offsets[t + 1] += offsets[t];
         }
         let mut cursor = offsets.clone();
-        let mut entries = vec![0u32; offsets[n_tiles] as usize];
+        let mut entries = try_filled(offsets[n_tiles] as usize, 0u32, "tile lists")?;
         for &i in order {
             for t in tiles(i) {
                 entries[cursor[t] as usize] = i;
                 cursor[t] += 1;
             }
         }
-        Self { offsets, entries }
+        Ok(Self { offsets, entries })
     }
 }
 

@@ -12,7 +12,7 @@ use crate::camera::Camera;
 use crate::project::{Projected, Splat2D};
 use crate::tiles::TileMask;
 use crate::simd::{F32x4, Mask4};
-use crate::{ALPHA_MAX, ALPHA_MIN, RenderMode, RenderOptions, RenderOutput, T_MIN, TILE_SIZE};
+use crate::{ALPHA_MAX, ALPHA_MIN, RasterError, RenderMode, RenderOptions, RenderOutput, T_MIN, TILE_SIZE, try_filled};
 
 const TILE: usize = TILE_SIZE as usize;
 /// Marks a pixel no Gaussian has contributed to.
@@ -63,27 +63,44 @@ impl Source for Binned<'_> {
 
 /// A new [`RenderOutput`] (timings and counts left at zero), background everywhere, with the
 /// tiles of `mask` (all when None) blended from `source`.
-pub fn composite<S: Source>(camera: &Camera, source: &S, options: &RenderOptions, mask: Option<&TileMask>) -> RenderOutput {
-    let mut out = blank(camera, options);
+pub fn composite<S: Source>(
+    camera: &Camera,
+    source: &S,
+    options: &RenderOptions,
+    mask: Option<&TileMask>,
+) -> Result<RenderOutput, RasterError> {
+    let mut out = blank(camera, options)?;
     composite_into(&mut out, camera, source, options, mask);
-    out
+    Ok(out)
 }
 
-/// An output of background only (index -1, alpha 0).
-pub fn blank(camera: &Camera, options: &RenderOptions) -> RenderOutput {
+/// An output of background only (index -1, alpha 0); an error where it does not fit in memory.
+pub fn blank(camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, RasterError> {
     let (width, height) = (camera.width as usize, camera.height as usize);
     let pixels = width * height;
     let with_color = options.mode == RenderMode::Full;
-    RenderOutput {
+    let colour = if with_color { pixels } else { 0 };
+    // reserve everything before touching any of it, and report what the whole image needs
+    let total = (4 * colour + 3 * pixels) * 4;
+    let reserve = |len: usize| -> Result<(), RasterError> {
+        let mut probe: Vec<f32> = Vec::new();
+        probe.try_reserve_exact(len).map_err(|_| RasterError::OutOfMemory { what: "image", bytes: total })
+    };
+    reserve(total / 4)?;
+    let mut rgb = try_filled(colour * 3, 0.0f32, "image")?;
+    for (c, out) in rgb.iter_mut().enumerate() {
+        *out = options.background[c % 3];
+    }
+    Ok(RenderOutput {
         width,
         height,
-        rgb: if with_color { options.background.repeat(pixels) } else { Vec::new() },
-        alpha: vec![0.0; pixels], // transmittance is tracked in both modes, so alpha is free
-        depth: vec![0.0; if with_color { pixels } else { 0 }],
-        index: vec![-1; pixels],
-        index_depth: vec![0.0; pixels],
+        rgb,
+        alpha: try_filled(pixels, 0.0, "image")?, // transmittance is tracked in both modes, so alpha is free
+        depth: try_filled(colour, 0.0, "image")?,
+        index: try_filled(pixels, -1, "image")?,
+        index_depth: try_filled(pixels, 0.0, "image")?,
         ..RenderOutput::default()
-    }
+    })
 }
 
 /// Blends the tiles of `mask` (all when None) from `source` into `out` (made for `camera` and

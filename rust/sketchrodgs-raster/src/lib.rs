@@ -82,9 +82,23 @@ pub enum RasterError {
     /// The footprints cover more (tile, Gaussian) pairs than we are willing to allocate.
     #[error("{0} (tile, Gaussian) pairs exceed the limit of {max}; render a smaller image or fewer huge Gaussians", max = MAX_TILE_PAIRS)]
     TooManyTilePairs(usize),
+    /// A buffer could not be allocated (the image, or the tile lists, would not fit in memory).
+    #[error("the {what} needs {:.2} GB, more memory than can be had: render a smaller image", *bytes as f64 / 1e9)]
+    OutOfMemory { what: &'static str, bytes: usize },
     /// More Gaussians than a 32-bit index can name.
     #[error("too many Gaussians ({0}); at most {max} are supported", max = u32::MAX)]
     TooManyGaussians(usize),
+}
+
+/// `len` copies of `value`, or an error naming `what` where the memory is not there (instead of
+/// the abort an infallible allocation makes).
+pub(crate) fn try_filled<T: Clone>(len: usize, value: T, what: &'static str) -> Result<Vec<T>, RasterError> {
+    let mut buffer = Vec::new();
+    buffer
+        .try_reserve_exact(len)
+        .map_err(|_| RasterError::OutOfMemory { what, bytes: len.saturating_mul(std::mem::size_of::<T>()) })?;
+    buffer.resize(len, value);
+    Ok(buffer)
 }
 
 /// The Gaussians to render, as borrowed slices (activated values, see DESIGN.md).
@@ -258,10 +272,10 @@ fn render(splats: &Splats, camera: &Camera, options: &RenderOptions, tiles: Opti
     if n_pairs > MAX_TILE_PAIRS {
         return Err(RasterError::TooManyTilePairs(n_pairs));
     }
-    let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles);
+    let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles)?;
     projected.rects = Vec::new(); // compositing needs only the splats
     let sorted_at = Instant::now();
-    let mut out = composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles);
+    let mut out = composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles)?;
     let end = Instant::now();
 
     out.n_visible = order.len();

@@ -84,7 +84,7 @@ impl Retained {
         if pairs > MAX_TILE_PAIRS {
             return Err(RasterError::TooManyTilePairs(pairs));
         }
-        let static_bins = TileBins::new(camera, &statics.rects, &order, None);
+        let static_bins = TileBins::new(camera, &statics.rects, &order, None)?;
         let n_static = order.len();
         drop(order);
         let mut statics = statics;
@@ -92,7 +92,7 @@ impl Retained {
         let k = splats.sh_coeffs;
         let sh = moving.iter().flat_map(|&r| &splats.sh[r as usize * k * 3..(r as usize + 1) * k * 3]).copied().collect();
         let opacities = moving.iter().map(|&r| splats.opacities[r as usize]).collect();
-        let image = blank(camera, options);
+        let image = blank(camera, options)?;
         let (grid_x, grid_y) = camera.tile_grid();
         let touched = vec![true; (grid_x * grid_y) as usize]; // the first frame blends every tile
         let mut retained = Self {

@@ -127,7 +127,7 @@ fn tile_lists_hold_each_gaussian_in_its_rectangle_front_to_back() {
     let (projected, rects) = (projected.splats, projected.rects);
     let order = sort_by_depth(&projected, &rects);
     assert_eq!(order.len(), rects.iter().filter(|r| !r.is_empty()).count());
-    let bins = TileBins::new(&cam, &rects, &order, None);
+    let bins = TileBins::new(&cam, &rects, &order, None).unwrap();
     assert_eq!(bins.len(), rects.iter().map(|r| r.area()).sum::<usize>());
     let mut seen = vec![0usize; rects.len()];
     for ty in 0..bins.grid_y as u16 {

@@ -22,6 +22,15 @@ pub enum RodError {
         length: f64,
         min_length: f64,
     },
+    /// An edge longer than a float can hold (coordinates near the float range).
+    #[error("edge {edge} has an infinite length: the coordinates are too large")]
+    EdgeTooLong { edge: usize },
+    /// A rotation given as a matrix that is not one.
+    #[error("rotation: not a rotation matrix (largest entry of R Rᵀ - I is {deviation:.3e}, det {determinant:.6}); give an orthonormal matrix with det 1")]
+    NotARotation { deviation: f64, determinant: f64 },
+    /// A grab on a pinned or clamped vertex.
+    #[error("vertex {vertex} is {}: set it free before grabbing it", if matches!(boundary, crate::Boundary::Pinned) { "pinned" } else { "clamped" })]
+    HeldVertex { vertex: usize, boundary: crate::Boundary },
     /// Two consecutive edges of the rest polyline point in opposite directions.
     #[error("vertex {vertex} folds the polyline back on itself (turning angle ~180 degrees)")]
     FoldedVertex { vertex: usize },

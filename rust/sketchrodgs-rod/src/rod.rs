@@ -252,6 +252,9 @@ impl ElasticRod {
         let x: Vec<DVec3> = polyline.iter().map(|p| DVec3::from_array(*p)).collect();
         let rest_len: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]).length()).collect();
         let length: f64 = rest_len.iter().sum();
+        if let Some(edge) = rest_len.iter().position(|l| !l.is_finite()) {
+            return Err(RodError::EdgeTooLong { edge });
+        }
         let min_length = MIN_EDGE_FRACTION * length.max(f64::MIN_POSITIVE);
         for (j, &l) in rest_len.iter().enumerate() {
             if l.is_nan() || l <= min_length {
@@ -570,6 +573,10 @@ impl ElasticRod {
     /// its position; its frame stays free). Replaces any previous grab.
     pub fn grab(&mut self, vertex: usize, target: [f64; 3]) -> Result<(), RodError> {
         self.check_vertex(vertex)?;
+        // a grab would move a held vertex while `boundaries` still says it is held
+        if let Some(&held @ (Boundary::Pinned | Boundary::Clamped)) = self.boundary.get(vertex) {
+            return Err(RodError::HeldVertex { vertex, boundary: held });
+        }
         self.grab = Some((vertex, finite_point("grab target", target)?));
         Ok(())
     }
@@ -1697,11 +1704,9 @@ fn finite_rotation(r: [[f64; 3]; 3]) -> Result<DMat3, RodError> {
     }
     let m = DMat3::from_cols_array_2d(&r).transpose();
     let off = (m * m.transpose() - DMat3::IDENTITY).to_cols_array();
-    if (m.determinant() - 1.0).abs() > 1.0e-6 || off.iter().any(|v| v.abs() > 1.0e-6) {
-        return Err(RodError::NonFiniteInput {
-            what: "rotation (not orthonormal, det 1)",
-            value: flat,
-        });
+    let deviation = off.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    if (m.determinant() - 1.0).abs() > 1.0e-6 || deviation > 1.0e-6 {
+        return Err(RodError::NotARotation { deviation, determinant: m.determinant() });
     }
     Ok(DMat3::from_quat(DQuat::from_mat3(&m).normalize()))
 }
