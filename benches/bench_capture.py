@@ -19,7 +19,6 @@ from pathlib import Path
 
 from _table import best_time, print_table
 from capture_scene import capture_scene
-
 from sketchrodgs import save_scene
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.extract import bindings_path, extract_rod
@@ -65,8 +64,12 @@ print(json.dumps(out))
 
 
 def pipeline_stats(path: Path) -> dict:
-    out = subprocess.run([sys.executable, "-c", _PIPELINE, str(path), str(Path(__file__).parent)],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", _PIPELINE, str(path), str(Path(__file__).parent)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(out.stdout)
 
 
@@ -120,8 +123,12 @@ def main() -> None:
             stages["png"] += time.perf_counter() - start
         frame_s = (time.perf_counter() - clock) / max(count, 1)
         parts = ", ".join(f"{k} {v / count * 1e3:.0f}" for k, v in stages.items())
-        rows.append([f"animate frame as `sketchrodgs animate` ({parts}; {len(animation.moving_rows):,} moving)",
-                     f"{frame_s * 1e3:.0f}"])
+        rows.append(
+            [
+                f"animate frame as `sketchrodgs animate` ({parts}; {len(animation.moving_rows):,} moving)",
+                f"{frame_s * 1e3:.0f}",
+            ]
+        )
         rows.append(["  its one-off set-up (project and bin the static part)", f"{setup * 1e3:.0f}"])
 
         path = Path(tmp) / "capture.ply"
@@ -133,11 +140,17 @@ def main() -> None:
         rod.save(rod_path)
         rod_size = os.path.getsize(rod_path) + os.path.getsize(bindings_path(rod_path))
     print_table(f"{n:,} Gaussians, SH 3 (the plant and 19 copies), 2 cores", ["step", "ms"], rows)
-    print_table("peak memory (VmHWM) of load -> extract -> animate in a fresh process",
-                ["after", "GB"], [[k, f"{stats[k] / 1e9:.2f}"] for k in ("start", "load", "extract", "animate")])
+    print_table(
+        "peak memory (VmHWM) of load -> extract -> animate in a fresh process",
+        ["after", "GB"],
+        [[k, f"{stats[k] / 1e9:.2f}"] for k in ("start", "load", "extract", "animate")],
+    )
     bound = len(rod.gaussian_ids)
-    print_table("rod file (JSON and its .npz)", ["bound Gaussians", "bytes", "MB per 100k bound"],
-                [[f"{bound:,}", f"{rod_size:,}", f"{rod_size / 1e6 / max(bound, 1) * 1e5:.1f}"]])
+    print_table(
+        "rod file (JSON and its .npz)",
+        ["bound Gaussians", "bytes", "MB per 100k bound"],
+        [[f"{bound:,}", f"{rod_size:,}", f"{rod_size / 1e6 / max(bound, 1) * 1e5:.1f}"]],
+    )
 
 
 if __name__ == "__main__":

@@ -10,12 +10,11 @@
 from __future__ import annotations
 
 import time
-
-import numpy as np
-from _table import print_table
-
 from pathlib import Path
 
+import numpy as np
+
+from _table import print_table
 from sketchrodgs import Camera, realcases, synthetic
 from sketchrodgs.baseline import knn_path
 from sketchrodgs.extract import extract_rod
@@ -32,12 +31,14 @@ def wide_rope(u: np.ndarray) -> np.ndarray:
 
 def main() -> None:
     rows = []
-    for name, curves, clutter in (("rope across the image", [wide_rope], 3000),
-                                  ("rope behind a pole", [wide_rope, synthetic.pole], 3000),
-                                  ("self-crossing loop", [synthetic.loop], 3000)):
+    for name, curves, clutter in (
+        ("rope across the image", [wide_rope], 3000),
+        ("rope behind a pole", [wide_rope, synthetic.pole], 3000),
+        ("self-crossing loop", [synthetic.loop], 3000),
+    ):
         tubes = synthetic.tube_scene(curves, radius=0.01, clutter=clutter, seed=4)
         uv, _ = CAMERA.project(tubes.axes[0])
-        stroke = uv[np.r_[0:len(uv) - 1:25, len(uv) - 1]]
+        stroke = uv[np.r_[0 : len(uv) - 1 : 25, len(uv) - 1]]
         images = render(tubes.scene, CAMERA, outputs="index")
         runs = []
         for _ in range(REPEAT):
@@ -45,20 +46,44 @@ def main() -> None:
             ex = extract_rod(tubes.scene, CAMERA, stroke, radius=tubes.radius, render=images)
             runs.append((time.perf_counter() - start, ex.timings))
         total, stages = min(runs, key=lambda r: r[0])
-        base = min((knn_path(tubes.scene.means, CAMERA, stroke, int(ex.path_gaussian_ids[0]),
-                             int(ex.path_gaussian_ids[-1])) for _ in range(3)), key=lambda b: b.seconds)
+        base = min(
+            (
+                knn_path(tubes.scene.means, CAMERA, stroke, int(ex.path_gaussian_ids[0]), int(ex.path_gaussian_ids[-1]))
+                for _ in range(3)
+            ),
+            key=lambda b: b.seconds,
+        )
         span = np.ptp(stroke[:, 0])
-        rows.append([
-            name, f"{len(tubes.scene):,}", f"{span:.0f}", f"{len(ex.polyline)}",
-            f"{stages['path_search'] * 1e3:.1f}", f"{stages['polyline'] * 1e3:.1f}",
-            f"{stages['segment_bind'] * 1e3:.1f}", f"{total * 1e3:.1f}",
-            f"{base.seconds * 1e3:.0f}", "goal" if base.reached_goal else f"stopped at {base.progress:.0%}",
-            f"{base.seconds / total:.1f}x",
-        ])
+        rows.append(
+            [
+                name,
+                f"{len(tubes.scene):,}",
+                f"{span:.0f}",
+                f"{len(ex.polyline)}",
+                f"{stages['path_search'] * 1e3:.1f}",
+                f"{stages['polyline'] * 1e3:.1f}",
+                f"{stages['segment_bind'] * 1e3:.1f}",
+                f"{total * 1e3:.1f}",
+                f"{base.seconds * 1e3:.0f}",
+                "goal" if base.reached_goal else f"stopped at {base.progress:.0%}",
+                f"{base.seconds / total:.1f}x",
+            ]
+        )
     print_table(
         f"extract_rod at {CAMERA.width}x{CAMERA.height}, K and Z given (best of {REPEAT})",
-        ["case", "gaussians", "stroke px", "rod vertices", "path ms", "polyline ms", "segment+bind ms", "total ms",
-         "k-NN baseline ms", "baseline", "baseline / ours"],
+        [
+            "case",
+            "gaussians",
+            "stroke px",
+            "rod vertices",
+            "path ms",
+            "polyline ms",
+            "segment+bind ms",
+            "total ms",
+            "k-NN baseline ms",
+            "baseline",
+            "baseline / ours",
+        ],
         rows,
     )
 
@@ -71,20 +96,43 @@ def real_cases() -> None:
         s = realcases.score_case(case, realcases.run_case(scenes[case["scene"]], case, jitter=10))
         misses = s.misses()
         met += not misses
-        rows.append([
-            s.name, f"{s.views}", f"{s.failures}", f"{s.cross_mean:.2f} / {s.cross_max:.2f}",
-            f"{s.cross_mean_estimated:.2f} / {s.cross_max_estimated:.2f}", f"{s.reverse_max:.2f}",
-            f"{s.jitter_mean:.2f} / {s.jitter_max:.2f}", f"{s.jitter_failures}/{s.jitter_count}",
-            f"{s.radius_low:.2f}-{s.radius_high:.2f}", f"{s.radius_spread:.2f}", f"{s.jaccard:.2f}",
-            "all" if not misses else f"{len(misses)} missed", f"{time.perf_counter() - start:.1f}",
-        ])
+        rows.append(
+            [
+                s.name,
+                f"{s.views}",
+                f"{s.failures}",
+                f"{s.cross_mean:.2f} / {s.cross_max:.2f}",
+                f"{s.cross_mean_estimated:.2f} / {s.cross_max_estimated:.2f}",
+                f"{s.reverse_max:.2f}",
+                f"{s.jitter_mean:.2f} / {s.jitter_max:.2f}",
+                f"{s.jitter_failures}/{s.jitter_count}",
+                f"{s.radius_low:.2f}-{s.radius_high:.2f}",
+                f"{s.radius_spread:.2f}",
+                f"{s.jaccard:.2f}",
+                "all" if not misses else f"{len(misses)} missed",
+                f"{time.perf_counter() - start:.1f}",
+            ]
+        )
     t = realcases.TARGETS
     print_table(
         f"real captures: {len(cases)} parts, distances in R (targets: views <= {t['cross_mean']} / {t['cross_max']}, "
         f"reversed <= {t['reverse_max']}, jitter <= {t['jitter_mean']} / {t['jitter_max']}, radius "
         f"{t['radius_low']}-{t['radius_high']} x R, spread <= {t['radius_spread']}); {met} meet every target",
-        ["case", "views", "failed", "views mean / max", "views, R est.", "reversed max", "jitter mean / max",
-         "jitter failed", "R est. / R", "R spread", "Jaccard", "targets", "s"],
+        [
+            "case",
+            "views",
+            "failed",
+            "views mean / max",
+            "views, R est.",
+            "reversed max",
+            "jitter mean / max",
+            "jitter failed",
+            "R est. / R",
+            "R spread",
+            "Jaccard",
+            "targets",
+            "s",
+        ],
         rows,
     )
 

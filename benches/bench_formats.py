@@ -23,9 +23,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
 from _table import best_time, print_table, wall_times
 from bench_io import peak_load_bytes, synthetic_scene
-
 from sketchrodgs import GaussianScene, _core, load_scene, save_scene
 from sketchrodgs.io import spz
 from sketchrodgs.io._quantized import empty_scene_arrays, map_file
@@ -46,8 +46,18 @@ GZIP_STAGE_CASES = {("SPZ v3 (gzip), SH 8 bits", 1_000_000), ("SPZ v3 (gzip), SH
 def spz_writer(version: int, sh_bits: tuple[int, int] = (8, 8)) -> Callable[[GaussianScene, Path], None]:
     def write(scene: GaussianScene, path: Path) -> None:
         # SPZ holds positions to +-2048 at 12 fractional bits and SH in (-1, 1)
-        path.write_bytes(encode_spz(scene.means, scene.scales, scene.quats, scene.opacities,
-                                    np.clip(scene.sh, -0.99, 0.99), version=version, sh_bits=sh_bits))
+        path.write_bytes(
+            encode_spz(
+                scene.means,
+                scene.scales,
+                scene.quats,
+                scene.opacities,
+                np.clip(scene.sh, -0.99, 0.99),
+                version=version,
+                sh_bits=sh_bits,
+            )
+        )
+
     return write
 
 
@@ -85,8 +95,18 @@ def rate_row(label: str, fmt: str, degree: int, path: Path, n: int, peak: bool) 
     if peak:
         used = peak_load_bytes(path)
         peak_text = f"{used / 1e6:.0f} MB ({used / size:.1f}x file)"
-    return [f"{n:,}", label, degree, f"{size / 1e6:.1f} MB", f"{seconds * 1e3:.1f}", f"{median * 1e3:.1f}",
-            f"{rate:.1f}", f"{n / median / 1e6:.1f}", verdict, peak_text]
+    return [
+        f"{n:,}",
+        label,
+        degree,
+        f"{size / 1e6:.1f} MB",
+        f"{seconds * 1e3:.1f}",
+        f"{median * 1e3:.1f}",
+        f"{rate:.1f}",
+        f"{n / median / 1e6:.1f}",
+        verdict,
+        peak_text,
+    ]
 
 
 def splat_breakdown(path: Path) -> list[list[object]]:
@@ -125,8 +145,18 @@ def gzip_breakdown(path: Path) -> list[list[object]]:
     total = best_time(lambda: load_scene(path), repeat=LOAD_REPEATS)
     mb = len(inflated) / 1e6
     return [
-        [f"inflate {mb:.0f} MB (libdeflate, one call)", f"{inflate_s * 1e3:.1f}", f"{mb / inflate_s:.0f} MB/s", f"{n / inflate_s / 1e6:.1f}"],
-        ["  the same with stdlib zlib, for scale", f"{zlib_s * 1e3:.1f}", f"{mb / zlib_s:.0f} MB/s", f"{n / zlib_s / 1e6:.1f}"],
+        [
+            f"inflate {mb:.0f} MB (libdeflate, one call)",
+            f"{inflate_s * 1e3:.1f}",
+            f"{mb / inflate_s:.0f} MB/s",
+            f"{n / inflate_s / 1e6:.1f}",
+        ],
+        [
+            "  the same with stdlib zlib, for scale",
+            f"{zlib_s * 1e3:.1f}",
+            f"{mb / zlib_s:.0f} MB/s",
+            f"{n / zlib_s / 1e6:.1f}",
+        ],
         ["decode into fresh arrays (Rust, all cores)", f"{decode_s * 1e3:.1f}", "", ""],
         ["GaussianScene validation", f"{check_s * 1e3:.1f}", "", ""],
         ["load_scene, whole", f"{total * 1e3:.1f}", "", f"{n / total / 1e6:.1f}"],
@@ -155,16 +185,28 @@ def main() -> None:
                     gzip_stages.append((f"{label} load of {n:,} splats by stage", gzip_breakdown(path)))
                 path.unlink()
     data = ROOT / "tests" / "data"
-    for name, label, fmt in (("guitar.compressed.ply", "guitar (real)", "compressed-ply"),
-                             ("biker.spz", "biker (real, SPZ v4)", "spz")):
+    for name, label, fmt in (
+        ("guitar.compressed.ply", "guitar (real)", "compressed-ply"),
+        ("biker.spz", "biker (real, SPZ v4)", "spz"),
+    ):
         path = data / name
         if path.exists():
             scene = load_scene(path)
             rows.append(rate_row(label, fmt, scene.sh_degree, path, len(scene), peak=True))
     print_table(
         f"scene decode rate (load_scene, best and median of {LOAD_REPEATS}; the target is met by the best)",
-        ["splats", "format", "SH", "file", "load ms", "median ms", "M splat/s", "at median", "issue target (M/s)",
-         "load peak RSS"],
+        [
+            "splats",
+            "format",
+            "SH",
+            "file",
+            "load ms",
+            "median ms",
+            "M splat/s",
+            "at median",
+            "issue target (M/s)",
+            "load peak RSS",
+        ],
         rows,
     )
     if breakdown:

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import plyfile
-from _table import best_time, print_table
 
+from _table import best_time, print_table
 from sketchrodgs import GaussianScene, load_scene, save_scene
 
 SIZES = (100_000, 1_000_000)
@@ -75,14 +75,31 @@ def main() -> None:
                     ref_s = best_time(lambda: reference_ply_load(path), repeat=3)
                     ref = f"{ref_s / load_s:.1f}x"
                 peak = peak_load_bytes(path)
-                rows.append([
-                    f"{n:,}", f".{fmt} SH{degree}", f"{size / 1e6:.0f} MB", f"{load_s * 1e3:.0f}",
-                    f"{n / load_s / 1e6:.1f}", f"{save_s * 1e3:.0f}", f"{peak / 1e6:.0f} MB ({peak / size:.2f}x)", ref,
-                ])
+                rows.append(
+                    [
+                        f"{n:,}",
+                        f".{fmt} SH{degree}",
+                        f"{size / 1e6:.0f} MB",
+                        f"{load_s * 1e3:.0f}",
+                        f"{n / load_s / 1e6:.1f}",
+                        f"{save_s * 1e3:.0f}",
+                        f"{peak / 1e6:.0f} MB ({peak / size:.2f}x)",
+                        ref,
+                    ]
+                )
                 path.unlink()
     print_table(
         "scene I/O (best of 3)",
-        ["gaussians", "format", "file", "load ms", "M splat/s", "save ms", "load peak RSS (x file)", "vs plyfile per-field"],
+        [
+            "gaussians",
+            "format",
+            "file",
+            "load ms",
+            "M splat/s",
+            "save ms",
+            "load peak RSS (x file)",
+            "vs plyfile per-field",
+        ],
         rows,
     )
 

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from _table import best_time, print_table
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -79,7 +80,9 @@ def threads_row(threads: int) -> list[object]:
         "s, c = b.plant(); print(best_time(lambda: b.render(s, c), repeat=b.REPEAT))"
     )
     env = {**os.environ, "RAYON_NUM_THREADS": str(threads)}
-    out = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)], env=env, capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(Path(__file__).parent)], env=env, capture_output=True, text=True, check=True
+    )
     return [threads, float(out.stdout.strip()) * 1e3]
 
 
@@ -96,9 +99,15 @@ def peak_memory() -> list[list[object]]:
         "open('/proc/self/clear_refs', 'w').write('5'); "
         "b.render(s, c); print(json.dumps([before, status('VmHWM:')]))"
     )
-    out = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(Path(__file__).parent)], capture_output=True, text=True, check=True
+    )
     before, peak = json.loads(out.stdout)
-    return [["resident with the 1M SH-3 scene loaded (its arrays: 236 MB)", before], ["peak during the render, all outputs", peak], ["render's own peak (difference)", peak - before]]
+    return [
+        ["resident with the 1M SH-3 scene loaded (its arrays: 236 MB)", before],
+        ["peak during the render, all outputs", peak],
+        ["render's own peak (difference)", peak - before],
+    ]
 
 
 def reference_ratio() -> list[object]:
@@ -117,13 +126,31 @@ def reference_ratio() -> list[object]:
 def main() -> None:
     scene, camera = plant()
     big = million_sh3()
-    headers = ["scene", "gaussians", "outputs", "visible", "tile pairs", "project ms", "sort+bin ms", "composite ms", "total ms"]
+    headers = [
+        "scene",
+        "gaussians",
+        "outputs",
+        "visible",
+        "tile pairs",
+        "project ms",
+        "sort+bin ms",
+        "composite ms",
+        "total ms",
+    ]
     rows = [row("plant (real capture)", scene, camera, o) for o in ("all", "index")]
     rows += [row("plant x9 jittered, SH-3", big, camera, o) for o in ("all", "index")]
-    print_table(f"render 960x540, best of {REPEAT} (stage columns: best per stage; total: best wall time)", headers, rows)
-    print_table("plant, all outputs, by thread count (RAYON_NUM_THREADS)", ["threads", "ms"], [threads_row(t) for t in (1, 2)])
+    print_table(
+        f"render 960x540, best of {REPEAT} (stage columns: best per stage; total: best wall time)", headers, rows
+    )
+    print_table(
+        "plant, all outputs, by thread count (RAYON_NUM_THREADS)", ["threads", "ms"], [threads_row(t) for t in (1, 2)]
+    )
     print_table("peak memory of a fresh process (MiB)", ["when", "MiB"], peak_memory())
-    print_table("NumPy reference vs Rust (float64 per-tile NumPy loop)", ["scene", "reference ms", "rust ms", "ratio"], [reference_ratio()])
+    print_table(
+        "NumPy reference vs Rust (float64 per-tile NumPy loop)",
+        ["scene", "reference ms", "rust ms", "ratio"],
+        [reference_ratio()],
+    )
 
 
 if __name__ == "__main__":

@@ -38,7 +38,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _table import print_table  # noqa: E402
-
 from sketchrodgs.rod import Rod, RodParams  # noqa: E402
 
 FRAME = 1.0 / 60.0
@@ -183,8 +182,15 @@ def pyelastica(n: int, amplitude: float) -> Run | str:
     m = MATERIAL
     sim = Sim()
     rod = ea.CosseratRod.straight_rod(
-        n - 1, np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), 1.0, m.radius, m.density,
-        youngs_modulus=m.youngs_modulus, shear_modulus=m.youngs_modulus / (2 * (1 + m.poisson_ratio)),
+        n - 1,
+        np.zeros(3),
+        np.array([1.0, 0, 0]),
+        np.array([0, 0, 1.0]),
+        1.0,
+        m.radius,
+        m.density,
+        youngs_modulus=m.youngs_modulus,
+        shear_modulus=m.youngs_modulus / (2 * (1 + m.poisson_ratio)),
     )
     sim.append(rod)
     sim.constrain(rod).using(ea.FixedConstraint, constrained_position_idx=(0, -1), constrained_director_idx=(0, -1))
@@ -260,7 +266,17 @@ def row(name: str, n: int, run: Run | str, amplitude: float) -> list[object]:
     return [name, n, f"{ms.mean():.3f}", f"{ms.max():.2f}", strain, ratio, reach, back, verdict(run) + note]
 
 
-HEADERS = ["solver", "n", "ms/frame", "max ms", "held strain", "max/mean", "grab reach", "at rest (<= 1e-3 L) after", "verdict"]
+HEADERS = [
+    "solver",
+    "n",
+    "ms/frame",
+    "max ms",
+    "held strain",
+    "max/mean",
+    "grab reach",
+    "at rest (<= 1e-3 L) after",
+    "verdict",
+]
 
 
 def pull_tables() -> None:
@@ -301,10 +317,18 @@ def extreme_table() -> None:
         report = rod.step(dt, n=steps)
         ms = 1e3 * (time.perf_counter() - t0) / (steps + 1)
         x = rod.positions
-        rows.append([
-            n, dt, f"{amplitude} L in one step", f"{ms:.2f}", first.substeps, report.substeps,
-            "no" if np.isfinite(x).all() else "yes", f"{np.abs(x - rod.rest_positions).max():.1e}",
-        ])
+        rows.append(
+            [
+                n,
+                dt,
+                f"{amplitude} L in one step",
+                f"{ms:.2f}",
+                first.substeps,
+                report.substeps,
+                "no" if np.isfinite(x).all() else "yes",
+                f"{np.abs(x - rod.rest_positions).max():.1e}",
+            ]
+        )
     print_table(
         "extreme input, sketchrodgs: grab target 3 L away in a single step, then released",
         ["n", "dt [s]", "pull", "ms/step", "substeps (pull)", f"substeps (next {100})", "NaN", "final |x - rest|"],
@@ -341,7 +365,13 @@ def cantilever_ours_dynamic(n: int) -> list[object]:
             break
         prev = tip
     ms = 1e3 * (time.perf_counter() - t0)
-    return ["sketchrodgs backward Euler, frames of 1/60 s", n, f"{100 * (tip / EB - 1):+.4f} %", f"{frames} frames", f"{ms:.2f}"]
+    return [
+        "sketchrodgs backward Euler, frames of 1/60 s",
+        n,
+        f"{100 * (tip / EB - 1):+.4f} %",
+        f"{frames} frames",
+        f"{ms:.2f}",
+    ]
 
 
 def cantilever_pyelastica(n: int) -> list[object]:
@@ -357,8 +387,15 @@ def cantilever_pyelastica(n: int) -> list[object]:
     m = STEEL
     sim = Sim()
     rod = ea.CosseratRod.straight_rod(
-        n - 1, np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), 1.0, m.radius, m.density,
-        youngs_modulus=m.youngs_modulus, shear_modulus=m.youngs_modulus / 3,
+        n - 1,
+        np.zeros(3),
+        np.array([1.0, 0, 0]),
+        np.array([0, 1.0, 0]),
+        1.0,
+        m.radius,
+        m.density,
+        youngs_modulus=m.youngs_modulus,
+        shear_modulus=m.youngs_modulus / 3,
     )
     sim.append(rod)
     sim.constrain(rod).using(ea.OneEndFixedBC, constrained_position_idx=(0,), constrained_director_idx=(0,))
@@ -409,8 +446,12 @@ def resolution_table() -> None:
         rod.clamp(0)
         rod.solve_static()
         pull = ours(n, 0.3)
-        rows.append([n, f"{-rod.positions[-1, 2] * 1e3:.4f}", f"{100 * pull.held_strain[0]:.2f} %" if pull.held_strain else "-"])
-    print_table("same material, different vertex counts", ["n", "cantilever sag [mm]", "held strain (0.3 L pull)"], rows)
+        rows.append(
+            [n, f"{-rod.positions[-1, 2] * 1e3:.4f}", f"{100 * pull.held_strain[0]:.2f} %" if pull.held_strain else "-"]
+        )
+    print_table(
+        "same material, different vertex counts", ["n", "cantilever sag [mm]", "held strain (0.3 L pull)"], rows
+    )
 
 
 def main() -> None:

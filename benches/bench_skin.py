@@ -9,14 +9,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _table import best_time, print_table
 from scipy.spatial.transform import Rotation
 
+from _table import best_time, print_table
 from sketchrodgs import data, deform_metrics, extract_rod, load_scene
 from sketchrodgs.animate import Animation, Pull
+from sketchrodgs.images import save_png, to_uint8
 from sketchrodgs.realcases import load_cases
 from sketchrodgs.realpulls import PULLS, pull_case
-from sketchrodgs.images import save_png, to_uint8
 from sketchrodgs.render import render
 from sketchrodgs.rod import Rod
 from sketchrodgs.skin import BoundRod, skin_into
@@ -24,6 +24,7 @@ from sketchrodgs.skin import BoundRod, skin_into
 CASES_FILE = Path(__file__).parents[1] / "tests" / "data" / "real_cases" / "cases.json"
 # more pulls than the three the tests hold to the targets
 MORE_PULLS = (("plant_main_stem", "az000"), ("tree_branch_tall", "az000"), ("guitar_stand_leg_left", "az090"))
+
 
 def bent_rod(vertices: int = 200) -> Rod:
     x = np.linspace(-0.5, 0.5, vertices)
@@ -60,15 +61,32 @@ def skin_rows() -> list[list[object]]:
             quats = rng.normal(size=(count, 4)).astype(np.float32)
             quats /= np.linalg.norm(quats, axis=1, keepdims=True)
             scales = rng.uniform(0.001, 0.01, (count, 3)).astype(np.float32)
-            bound = BoundRod(np.arange(count, dtype=np.int64), segment, rng.uniform(0, 1, count).astype(np.float32),
-                             rng.normal(scale=0.01, size=(count, 3)).astype(np.float32), np.ones(count, np.float32),
-                             np.zeros(count, bool), quats, scales, rest, np.tile(np.eye(3), (rod.num_vertices, 1, 1)))
+            bound = BoundRod(
+                np.arange(count, dtype=np.int64),
+                segment,
+                rng.uniform(0, 1, count).astype(np.float32),
+                rng.normal(scale=0.01, size=(count, 3)).astype(np.float32),
+                np.ones(count, np.float32),
+                np.zeros(count, bool),
+                quats,
+                scales,
+                rest,
+                np.tile(np.eye(3), (rod.num_vertices, 1, 1)),
+            )
             means, out_quats, out_scales = rng.normal(size=(count, 3)).astype(np.float32), quats.copy(), scales.copy()
             seconds = best_time(lambda: skin_into(means, out_quats, out_scales, [bound], [rod]), repeat=7)
             rotations = np.asarray(rod.vertex_frames)
             ref = best_time(lambda: numpy_reference(rod.positions, rotations, bound), repeat=2)
-            rows.append([shape, f"{count:,}", f"{seconds * 1e3:.1f}", f"{count / seconds / 1e6:.0f}", f"{ref * 1e3:.0f}",
-                         f"{ref / seconds:.0f}x"])
+            rows.append(
+                [
+                    shape,
+                    f"{count:,}",
+                    f"{seconds * 1e3:.1f}",
+                    f"{count / seconds / 1e6:.0f}",
+                    f"{ref * 1e3:.0f}",
+                    f"{ref / seconds:.0f}x",
+                ]
+            )
     return rows
 
 
@@ -83,11 +101,21 @@ def pull_rows() -> list[list[object]]:
         after = pull_case(scene, case, view)
         seconds = time.perf_counter() - clock
         target = "yes" if (name, view) in PULLS else ""
-        rows.append([after.name, target, f"{len(before.rest):,}", f"{len(after.rest):,}",
-                     f"{int(after.extraction.binding.attached.sum()):,}",
-                     f"{100 * before.needles:.2f}", f"{100 * after.needles:.2f}",
-                     f"{100 * before.tears:.2f}", f"{100 * after.tears:.2f}", f"{after.skin_seconds * 1e3:.1f}",
-                     f"{seconds:.1f}"])
+        rows.append(
+            [
+                after.name,
+                target,
+                f"{len(before.rest):,}",
+                f"{len(after.rest):,}",
+                f"{int(after.extraction.binding.attached.sum()):,}",
+                f"{100 * before.needles:.2f}",
+                f"{100 * after.needles:.2f}",
+                f"{100 * before.tears:.2f}",
+                f"{100 * after.tears:.2f}",
+                f"{after.skin_seconds * 1e3:.1f}",
+                f"{seconds:.1f}",
+            ]
+        )
     return rows
 
 
@@ -96,7 +124,9 @@ def arc_rows() -> list[list[object]]:
     for degrees in (45, 90, 180):
         split = deform_metrics.arc_bend(np.radians(degrees))
         plain = deform_metrics.arc_bend(np.radians(degrees), subdivide=False)
-        rows.append([degrees, int(split["gaussians"]), int(split["vertices"]), f"{split['psnr']:.1f}", f"{plain['psnr']:.1f}"])
+        rows.append(
+            [degrees, int(split["gaussians"]), int(split["vertices"]), f"{split['psnr']:.1f}", f"{plain['psnr']:.1f}"]
+        )
     return rows
 
 
@@ -123,22 +153,48 @@ def plant_rows() -> list[list[object]]:
             save_png(Path(tmp) / f"{frame.index:04d}.png", rgb)
             totals["png"] += time.perf_counter() - clock
     total = time.perf_counter() - start
-    return [[f"{len(scene):,}", len(extraction.gaussian_ids), f"{extract_s * 1e3:.0f}"]
-            + [f"{totals[k]:.2f}" for k in totals] + [f"{total:.1f}"]]
+    return [
+        [f"{len(scene):,}", len(extraction.gaussian_ids), f"{extract_s * 1e3:.0f}"]
+        + [f"{totals[k]:.2f}" for k in totals]
+        + [f"{total:.1f}"]
+    ]
 
 
 def main() -> None:
-    print_table("skin_into: bound Gaussians following a 200-vertex rod, bent, or stretched so that every "
-                "covariance is re-diagonalised (best of 7; reference: numpy centres only)",
-                ["rod", "bound gaussians", "ms", "M gaussians/s", "numpy reference ms", "ratio"], skin_rows())
-    print_table("real pulls of 0.35 L across the view, held (needles over the rod's own Gaussians, tears over all; "
-                "target <= 0.5 % and <= 0.3 %): before = one binding per Gaussian, no attached parts, no ease",
-                ["pull", "target", "gaussians before", "after (split)", "attached", "needles % before", "needles % after",
-                 "tears % before", "tears % after", "skin ms/frame", "extract+pull s"], pull_rows())
-    print_table("exact arc bend vs our skinning at 960x540 (target >= 35 dB)",
-                ["degrees", "bound gaussians", "rod vertices", "PSNR dB", "PSNR dB unsplit"], arc_rows())
-    print_table("animate: 60 frames (2 s at 30 fps) of the plant capture at 960x540, pull + hold + release",
-                ["gaussians", "bound", "extract ms", "simulate s", "skin s", "render s", "png s", "total s"], plant_rows())
+    print_table(
+        "skin_into: bound Gaussians following a 200-vertex rod, bent, or stretched so that every "
+        "covariance is re-diagonalised (best of 7; reference: numpy centres only)",
+        ["rod", "bound gaussians", "ms", "M gaussians/s", "numpy reference ms", "ratio"],
+        skin_rows(),
+    )
+    print_table(
+        "real pulls of 0.35 L across the view, held (needles over the rod's own Gaussians, tears over all; "
+        "target <= 0.5 % and <= 0.3 %): before = one binding per Gaussian, no attached parts, no ease",
+        [
+            "pull",
+            "target",
+            "gaussians before",
+            "after (split)",
+            "attached",
+            "needles % before",
+            "needles % after",
+            "tears % before",
+            "tears % after",
+            "skin ms/frame",
+            "extract+pull s",
+        ],
+        pull_rows(),
+    )
+    print_table(
+        "exact arc bend vs our skinning at 960x540 (target >= 35 dB)",
+        ["degrees", "bound gaussians", "rod vertices", "PSNR dB", "PSNR dB unsplit"],
+        arc_rows(),
+    )
+    print_table(
+        "animate: 60 frames (2 s at 30 fps) of the plant capture at 960x540, pull + hold + release",
+        ["gaussians", "bound", "extract ms", "simulate s", "skin s", "render s", "png s", "total s"],
+        plant_rows(),
+    )
 
 
 if __name__ == "__main__":

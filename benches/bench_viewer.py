@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 import viser
-from _table import print_table
 from websockets.sync.client import connect
 
+from _table import print_table
 from sketchrodgs import Camera, data, extract_rod, load_scene
 from sketchrodgs.scene import GaussianScene
 from sketchrodgs.viewer.display import SceneDisplay
@@ -29,8 +29,16 @@ from sketchrodgs.viewer.rods import RodSet
 FPS = 60.0
 FRAMES = 120
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 # What the viser 1.1 client does on its main thread when any splat node's buffer changes
 # (client/src/Splatting/GaussianSplats.tsx: mergeGaussianGroups, then the texture staging copy and
 # the post to the sorting worker), replayed on synthetic buffers; GPU upload and re-sort excluded.
@@ -85,10 +93,19 @@ def with_filler(scene: GaussianScene, total: int, seed: int = 0) -> GaussianScen
     means = np.c_[rng.uniform(-2, 2, n), rng.uniform(-2, 2, n), rng.uniform(0.5, 3, n)].astype(np.float32)
     quats = rng.normal(size=(n, 4)).astype(np.float32)
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)
-    filler = GaussianScene.from_colors(means, rng.uniform(0.002, 0.02, (n, 3)).astype(np.float32), quats,
-                                       rng.uniform(0.2, 1, n).astype(np.float32), rng.uniform(0, 1, (n, 3)))
-    return GaussianScene(*(np.concatenate([getattr(scene, k), getattr(filler, k)])
-                           for k in ("means", "scales", "quats", "opacities", "sh")))
+    filler = GaussianScene.from_colors(
+        means,
+        rng.uniform(0.002, 0.02, (n, 3)).astype(np.float32),
+        quats,
+        rng.uniform(0.2, 1, n).astype(np.float32),
+        rng.uniform(0, 1, (n, 3)),
+    )
+    return GaussianScene(
+        *(
+            np.concatenate([getattr(scene, k), getattr(filler, k)])
+            for k in ("means", "scales", "quats", "opacities", "sh")
+        )
+    )
 
 
 class WireCounter:
@@ -205,22 +222,47 @@ def main() -> None:
         for update in ("exact", "segments"):
             m = measure(scene, extraction, update)
             sim_skin_push = m["simulate"] + m["skin"] + m["push"]
-            rows.append([f"{total:,}", update, f"{m['bound']:,}", f"{m['simulate']:.2f}", f"{m['skin']:.2f}",
-                         f"{m['push']:.2f}", f"{sim_skin_push:.2f}", f"{m['cpu']:.2f}",
-                         f"{m['bytes'] / 1e3:.1f}", f"{m['add_s']:.2f}", f"{m['add_mb']:.1f}"])
+            rows.append(
+                [
+                    f"{total:,}",
+                    update,
+                    f"{m['bound']:,}",
+                    f"{m['simulate']:.2f}",
+                    f"{m['skin']:.2f}",
+                    f"{m['push']:.2f}",
+                    f"{sim_skin_push:.2f}",
+                    f"{m['cpu']:.2f}",
+                    f"{m['bytes'] / 1e3:.1f}",
+                    f"{m['add_s']:.2f}",
+                    f"{m['add_mb']:.1f}",
+                ]
+            )
     totals = [10_000, 100_000, 1_000_000]
     merge = browser_merge_ms(totals, 5_000)
     if merge is None:
         print("\n(no Chromium at /usr/bin/chromium: browser-side merge not measured)")
     else:
-        print_table("browser main thread per 'exact' rod update (viser 1.1 merge/copy/post replica, headless "
-                    "Chromium, GPU upload and re-sort excluded)",
-                    ["scene Gaussians", "ms per update", "updates/s it allows"],
-                    [[f"{t:,}", f"{ms:.1f}", f"{1e3 / ms:.0f}"] for t, ms in zip(totals, merge)])
+        print_table(
+            "browser main thread per 'exact' rod update (viser 1.1 merge/copy/post replica, headless "
+            "Chromium, GPU upload and re-sort excluded)",
+            ["scene Gaussians", "ms per update", "updates/s it allows"],
+            [[f"{t:,}", f"{ms:.1f}", f"{1e3 / ms:.0f}"] for t, ms in zip(totals, merge)],
+        )
     print_table(
         f"viewer frame, Python side ({FRAMES} frames at {FPS:.0f} Hz, one rod pulled)",
-        ["scene Gaussians", "rod update", "rod Gaussians", "simulate ms", "skin ms", "push ms",
-         "sim+skin+push ms", "process CPU ms/frame", "sent kB/frame", "add rod s", "add rod MB"],
+        [
+            "scene Gaussians",
+            "rod update",
+            "rod Gaussians",
+            "simulate ms",
+            "skin ms",
+            "push ms",
+            "sim+skin+push ms",
+            "process CPU ms/frame",
+            "sent kB/frame",
+            "add rod s",
+            "add rod MB",
+        ],
         rows,
     )
 

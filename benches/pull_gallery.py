@@ -57,19 +57,24 @@ def main() -> None:
         old = pull_case(scene, case, view, extract={"attach": False}, subdivide=False, end_ramp=0.0)
         new = pull_case(scene, case, view)
         box = crop_box(new, old)
-        panels = [panel(new.rest, new, box, f"{name} at rest"),
-                  panel(old.deformed, old, box, f"before: needles {old.needles:.1%}, tears {old.tears:.1%}"),
-                  panel(new.deformed, new, box, f"now: needles {new.needles:.1%}, tears {new.tears:.1%}")]
-        sheet = Image.new("RGB", (sum(p.width for p in panels) + 8 * (len(panels) - 1), max(p.height for p in panels)),
-                          "white")
+        panels = [
+            panel(new.rest, new, box, f"{name} at rest"),
+            panel(old.deformed, old, box, f"before: needles {old.needles:.1%}, tears {old.tears:.1%}"),
+            panel(new.deformed, new, box, f"now: needles {new.needles:.1%}, tears {new.tears:.1%}"),
+        ]
+        sheet = Image.new(
+            "RGB", (sum(p.width for p in panels) + 8 * (len(panels) - 1), max(p.height for p in panels)), "white"
+        )
         x = 0
         for p in panels:
             sheet.paste(p, (x, 0))
             x += p.width + 8
         path = args.out / f"pull_{name}.png"
         save_png(path, np.asarray(sheet))
-        print(f"{path}: before needles {old.needles:.2%} tears {old.tears:.2%}; now needles {new.needles:.2%} "
-              f"tears {new.tears:.2%}")
+        print(
+            f"{path}: before needles {old.needles:.2%} tears {old.tears:.2%}; now needles {new.needles:.2%} "
+            f"tears {new.tears:.2%}"
+        )
 
 
 if __name__ == "__main__":

@@ -36,7 +36,9 @@ def case_view_overlay(scene, case: dict, view: dict) -> tuple[Image.Image, str]:
         image = draw_overlay(images.rgb, camera, stroke, ex.pixel_path, ex.polyline, scene.means[ex.gaussian_ids])
         summary = f"{len(ex.polyline)} vertices, {len(ex.gaussian_ids):,} Gaussians, coverage {ex.coverage:.2f}"
     except PathNotFoundError as err:
-        image = draw_overlay(images.rgb, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", []))
+        image = draw_overlay(
+            images.rgb, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", [])
+        )
         summary = f"failed: {err}"
     low = np.maximum(stroke.min(axis=0) - MARGIN_PX, 0).astype(int)
     high = np.minimum(stroke.max(axis=0) + MARGIN_PX, [camera.width, camera.height]).astype(int)

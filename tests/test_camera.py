@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import DATA
 
+from conftest import DATA
 from sketchrodgs import Camera, CameraError, load_cameras
 from sketchrodgs.camera import select_camera
 
@@ -22,8 +22,9 @@ def test_project_follows_opencv_pinhole():
 
 def test_look_at_reproduces_the_oracle_cameras():
     for entry in json.loads((DATA / "cameras_plant.json").read_text())["cameras"]:
-        cam = Camera.look_at(entry["eye"], entry["target"], entry["world_up"], 960, 540,
-                             fov_y_deg=np.degrees(2 * np.arctan(270 / 800)))
+        cam = Camera.look_at(
+            entry["eye"], entry["target"], entry["world_up"], 960, 540, fov_y_deg=np.degrees(2 * np.arctan(270 / 800))
+        )
         np.testing.assert_allclose(cam.world_to_camera, entry["world_to_camera"], atol=1e-12)
         assert cam.fx == pytest.approx(800) and (cam.cx, cam.cy) == (480, 270)
 
@@ -68,8 +69,16 @@ def test_3dgs_cameras_json(tmp_path):
     # A camera at C looking down world -z with 3DGS's camera-to-world rotation.
     c2w = np.diag([1.0, -1.0, -1.0])
     centre = np.array([0.5, 0.0, 3.0])
-    entry = {"id": 0, "img_name": "IMG_0001", "width": 800, "height": 600,
-             "position": centre.tolist(), "rotation": c2w.tolist(), "fx": 700.0, "fy": 700.0}
+    entry = {
+        "id": 0,
+        "img_name": "IMG_0001",
+        "width": 800,
+        "height": 600,
+        "position": centre.tolist(),
+        "rotation": c2w.tolist(),
+        "fx": 700.0,
+        "fy": 700.0,
+    }
     (tmp_path / "cameras.json").write_text(json.dumps([entry]))
     (cam,) = load_cameras(tmp_path / "cameras.json")
     assert cam.name == "IMG_0001" and (cam.cx, cam.cy) == (400, 300)
@@ -112,11 +121,15 @@ def test_degenerate_cameras_are_errors(kwargs, message):
         ("not json", "not valid JSON"),
         ("[]", "non-empty list"),
         ('{"width": 10}', "camera 0: missing field"),
-        ('[{"width": 10, "height": 10, "fx": 5, "fy": 5, "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},'
-         ' {"width": 10, "height": 10, "fx": -5, "fy": 5, "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]',
-         "camera 1: camera focal length"),
-        ('[{"id": 0, "width": 4, "height": 4, "position": [0, 0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 1, "fy": 1}]',
-         "rotation must be 3x3 and position 3 numbers"),
+        (
+            '[{"width": 10, "height": 10, "fx": 5, "fy": 5, "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},'
+            ' {"width": 10, "height": 10, "fx": -5, "fy": 5, "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]',
+            "camera 1: camera focal length",
+        ),
+        (
+            '[{"id": 0, "width": 4, "height": 4, "position": [0, 0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 1, "fy": 1}]',
+            "rotation must be 3x3 and position 3 numbers",
+        ),
     ],
 )
 def test_bad_camera_files_name_file_and_camera(tmp_path, content, message):

@@ -19,7 +19,9 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_console_script_is_installed():
     # the script sits beside the interpreter of the environment the package is installed in
-    exe = shutil.which("sketchrodgs", path=os.pathsep.join([os.path.dirname(sys.executable), os.environ.get("PATH", "")]))
+    exe = shutil.which(
+        "sketchrodgs", path=os.pathsep.join([os.path.dirname(sys.executable), os.environ.get("PATH", "")])
+    )
     assert exe, "the sketchrodgs console script is not on PATH"
     out = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout.startswith("sketchrodgs ")

@@ -35,14 +35,35 @@ def test_animate_writes_frames_video_and_ply(ring_rod, tmp_path):
     path, extraction = ring_rod
     middle = len(extraction.polyline) // 2
     out = tmp_path / "anim"
-    result = run_cli("animate", "sample:ring", str(path), "--grab", str(middle), "--to", "0,0.12,-0.08", "--duration", "0.3",
-                     "--hold", "0.2", "--release", "--settle", "0.5", "--fps", "20", "-o", str(out), "--ply",
-                     "--video", "pull.gif")
+    result = run_cli(
+        "animate",
+        "sample:ring",
+        str(path),
+        "--grab",
+        str(middle),
+        "--to",
+        "0,0.12,-0.08",
+        "--duration",
+        "0.3",
+        "--hold",
+        "0.2",
+        "--release",
+        "--settle",
+        "0.5",
+        "--fps",
+        "20",
+        "-o",
+        str(out),
+        "--ply",
+        "--video",
+        "pull.gif",
+    )
     assert result.returncode == 0, result.stderr
     frames = sorted((out / "frames").glob("frame_*.png"))
     assert len(frames) == 20  # (0.3 + 0.2 + 0.5) s at 20 fps
     first, held, last = (np.asarray(Image.open(frames[k]), np.int16) for k in (0, 7, -1))  # 7: frame 8, held
     assert first.shape == (180, 320, 3)
+
     def changed(a, b) -> int:  # pixels that changed visibly
         return int((np.abs(a - b).max(axis=2) > 40).sum())
 
@@ -60,8 +81,23 @@ def test_animate_writes_frames_video_and_ply(ring_rod, tmp_path):
 
 def test_animate_mp4(ring_rod, tmp_path):
     path, extraction = ring_rod
-    result = run_cli("animate", "sample:ring", str(path), "--grab", "5", "--to", "0,0.05,0", "--duration", "0.2",
-                     "--hold", "0.1", "--fps", "20", "-o", str(tmp_path / "a"))
+    result = run_cli(
+        "animate",
+        "sample:ring",
+        str(path),
+        "--grab",
+        "5",
+        "--to",
+        "0,0.05,0",
+        "--duration",
+        "0.2",
+        "--hold",
+        "0.1",
+        "--fps",
+        "20",
+        "-o",
+        str(tmp_path / "a"),
+    )
     assert result.returncode == 0, result.stderr
     video = (tmp_path / "a" / "pull.mp4").read_bytes()
     assert len(video) > 1000 and video[4:8] == b"ftyp"
@@ -72,9 +108,23 @@ def test_bad_rod_files_and_arguments_fail_readably(ring_rod, tmp_path):
     broken = extraction.to_json()  # the inline form older rod files have
     broken["binding"]["segment"] = broken["binding"]["segment"][:-1]
     (tmp_path / "broken.json").write_text(json.dumps(broken))
-    result = run_cli("animate", "sample:ring", str(tmp_path / "broken.json"), "--grab", "3", "--to", "0,0.1,0",
-                     "-o", str(tmp_path / "x"))
+    result = run_cli(
+        "animate",
+        "sample:ring",
+        str(tmp_path / "broken.json"),
+        "--grab",
+        "3",
+        "--to",
+        "0,0.1,0",
+        "-o",
+        str(tmp_path / "x"),
+    )
     assert result.returncode == 1 and "binding.segment" in result.stderr and "Traceback" not in result.stderr
     result = run_cli("animate", "sample:ring", str(path), "--grab", "999", "--to", "0,0.1,0", "-o", str(tmp_path / "y"))
     assert result.returncode == 1 and "grab vertex" in result.stderr
-    assert run_cli("animate", "sample:ring", str(path), "--grab", "3", "--to", "0,nan,0", "-o", str(tmp_path / "z")).returncode == 2
+    assert (
+        run_cli(
+            "animate", "sample:ring", str(path), "--grab", "3", "--to", "0,nan,0", "-o", str(tmp_path / "z")
+        ).returncode
+        == 2
+    )

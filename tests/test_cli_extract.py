@@ -28,8 +28,18 @@ def ring_stroke() -> list[list[float]]:
 def test_extract_writes_rod_json_and_overlay(tmp_path):
     CAMERA.save(tmp_path / "cam.json")
     (tmp_path / "stroke.json").write_text(json.dumps({"points": ring_stroke()}))
-    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
-                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"), "--overlay", str(tmp_path / "o.png"))
+    result = run_cli(
+        "extract",
+        "sample:ring",
+        "--camera",
+        str(tmp_path / "cam.json"),
+        "--stroke",
+        str(tmp_path / "stroke.json"),
+        "-o",
+        str(tmp_path / "rod.json"),
+        "--overlay",
+        str(tmp_path / "o.png"),
+    )
     assert result.returncode == 0, result.stderr
     assert "stroke covered 100%" in result.stdout
     rod = json.loads((tmp_path / "rod.json").read_text())
@@ -49,8 +59,16 @@ def test_extract_writes_rod_json_and_overlay(tmp_path):
 def test_extract_on_background_fails_with_one_line(tmp_path):
     CAMERA.save(tmp_path / "cam.json")
     (tmp_path / "stroke.json").write_text(json.dumps({"points": [[5, 5], [60, 8], [120, 5]]}))
-    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
-                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"))
+    result = run_cli(
+        "extract",
+        "sample:ring",
+        "--camera",
+        str(tmp_path / "cam.json"),
+        "--stroke",
+        str(tmp_path / "stroke.json"),
+        "-o",
+        str(tmp_path / "rod.json"),
+    )
     assert result.returncode == 1
     assert len(result.stderr.strip().splitlines()) == 1 and "background" in result.stderr
     assert not (tmp_path / "rod.json").exists()
@@ -60,9 +78,18 @@ def test_a_failed_extract_still_writes_the_overlay(tmp_path):
     """With --overlay a failure draws what the stroke met, so the user sees what to change."""
     CAMERA.save(tmp_path / "cam.json")
     (tmp_path / "stroke.json").write_text(json.dumps({"points": [[5, 5], [60, 8], [120, 5]]}))
-    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
-                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"),
-                     "--overlay", str(tmp_path / "fail.png"))
+    result = run_cli(
+        "extract",
+        "sample:ring",
+        "--camera",
+        str(tmp_path / "cam.json"),
+        "--stroke",
+        str(tmp_path / "stroke.json"),
+        "-o",
+        str(tmp_path / "rod.json"),
+        "--overlay",
+        str(tmp_path / "fail.png"),
+    )
     assert result.returncode == 1 and "fail.png" in result.stderr
     assert not (tmp_path / "rod.json").exists()
     overlay = np.asarray(Image.open(tmp_path / "fail.png").convert("RGB"))
@@ -73,8 +100,16 @@ def test_a_failed_extract_still_writes_the_overlay(tmp_path):
 def test_extract_rejects_a_malformed_stroke_file(tmp_path):
     CAMERA.save(tmp_path / "cam.json")
     (tmp_path / "stroke.json").write_text(json.dumps({"points": [1, 2, 3]}))
-    result = run_cli("extract", "sample:ring", "--camera", str(tmp_path / "cam.json"), "--stroke",
-                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "rod.json"))
+    result = run_cli(
+        "extract",
+        "sample:ring",
+        "--camera",
+        str(tmp_path / "cam.json"),
+        "--stroke",
+        str(tmp_path / "stroke.json"),
+        "-o",
+        str(tmp_path / "rod.json"),
+    )
     assert result.returncode == 1 and "stroke.json" in result.stderr
 
 
@@ -85,14 +120,33 @@ def test_extract_can_leave_attached_parts_behind(tmp_path):
     (tmp_path / "stroke.json").write_text(json.dumps({"points": stroke.tolist()}))
     rods = {}
     for name, extra in (("default", []), ("none", ["--no-attach"]), ("small", ["--attach-size", "1e-4"])):
-        result = run_cli("extract", "sample:plant", "--camera", str(tmp_path / "cam.json"), "--stroke",
-                         str(tmp_path / "stroke.json"), "-o", str(tmp_path / f"{name}.json"), *extra)
+        result = run_cli(
+            "extract",
+            "sample:plant",
+            "--camera",
+            str(tmp_path / "cam.json"),
+            "--stroke",
+            str(tmp_path / "stroke.json"),
+            "-o",
+            str(tmp_path / f"{name}.json"),
+            *extra,
+        )
         assert result.returncode == 0, result.stderr
         rods[name] = load_rod(tmp_path / f"{name}.json")[0]
     assert rods["default"].binding.attached.sum() > 100
     for name in ("none", "small"):
         assert rods[name].binding.attached.sum() == 0
         assert len(rods[name].gaussian_ids) < len(rods["default"].gaussian_ids)
-    result = run_cli("extract", "sample:plant", "--camera", str(tmp_path / "cam.json"), "--stroke",
-                     str(tmp_path / "stroke.json"), "-o", str(tmp_path / "x.json"), "--attach-size", "-1")
+    result = run_cli(
+        "extract",
+        "sample:plant",
+        "--camera",
+        str(tmp_path / "cam.json"),
+        "--stroke",
+        str(tmp_path / "stroke.json"),
+        "-o",
+        str(tmp_path / "x.json"),
+        "--attach-size",
+        "-1",
+    )
     assert result.returncode == 2 and "attach-size" in result.stderr

@@ -22,8 +22,9 @@ AXIS = np.stack([np.linspace(0, 1, 101), np.zeros(101), np.zeros(101)], axis=1)
 def scene_of(means, scales, quats=None) -> GaussianScene:
     n = len(means)
     quats = np.tile([1.0, 0, 0, 0], (n, 1)) if quats is None else quats
-    return GaussianScene.from_colors(np.asarray(means, float), np.asarray(scales, float), quats, np.full(n, 0.5),
-                                     np.full((n, 3), 0.5))
+    return GaussianScene.from_colors(
+        np.asarray(means, float), np.asarray(scales, float), quats, np.full(n, 0.5), np.full((n, 3), 0.5)
+    )
 
 
 def test_a_needle_sticking_out_of_a_bend_counts_and_a_rigid_move_does_not():
@@ -62,15 +63,18 @@ def pulls():
     out = {}
     for name, view in PULLS:
         case = next(c for c in cases if c["name"] == name)
-        out[name] = (pull_case(scenes[case["scene"]], case, view),
-                     pull_case(scenes[case["scene"]], case, view, extract={"attach": False}, subdivide=False,
-                               end_ramp=0.0))
+        out[name] = (
+            pull_case(scenes[case["scene"]], case, view),
+            pull_case(scenes[case["scene"]], case, view, extract={"attach": False}, subdivide=False, end_ramp=0.0),
+        )
     return out
 
 
 # Measured misses (docs/deformation.md, "Where it still falls short").
-TEAR_MISSES = {"tree_branch_centre": "the branch crosses another and carries a piece of it (0.42 %)",
-               "plant_side_stem_left": "leaves of the main stem touch it near its base (0.46 %)"}
+TEAR_MISSES = {
+    "tree_branch_centre": "the branch crosses another and carries a piece of it (0.42 %)",
+    "plant_side_stem_left": "leaves of the main stem touch it near its base (0.46 %)",
+}
 
 
 @pytest.mark.parametrize("name", [name for name, _ in PULLS])
@@ -80,9 +84,15 @@ def test_pulls_leave_no_needles(pulls, name):
     assert now.needles <= before.needles
 
 
-@pytest.mark.parametrize("name", [
-    pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=TEAR_MISSES[name])) if name in TEAR_MISSES else name
-    for name, _ in PULLS])
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=TEAR_MISSES[name]))
+        if name in TEAR_MISSES
+        else name
+        for name, _ in PULLS
+    ],
+)
 def test_pulls_do_not_tear(pulls, name):
     now, _ = pulls[name]
     assert now.tears <= 0.003, now.tears

@@ -15,8 +15,9 @@ from sketchrodgs.extract import load_rod
 
 def test_demo_writes_everything_it_promises(tmp_path):
     out = tmp_path / "demo"
-    result = subprocess.run([sys.executable, "-m", "sketchrodgs", "demo", "-o", str(out)], capture_output=True,
-                            text=True, timeout=300)
+    result = subprocess.run(
+        [sys.executable, "-m", "sketchrodgs", "demo", "-o", str(out)], capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 0, result.stderr
     for name in ("view.png", "overlay.png", "pulled.png", "rod.json", "pull.mp4", "summary.txt"):
         assert (out / name).stat().st_size > 0, name
@@ -31,7 +32,9 @@ def test_demo_writes_everything_it_promises(tmp_path):
     assert np.median(gaps) < 15, gaps
     assert 300 < len(load_rod(out / "rod.json")[0].gaussian_ids) < len(load_scene(data.sample("plant"))) // 20
     # the pulled frame differs from the view where the stem is, and the last frame is back at rest
-    view, pulled, last = (np.asarray(Image.open(out / n), np.int16) for n in ("view.png", "pulled.png", "frames/frame_0060.png"))
+    view, pulled, last = (
+        np.asarray(Image.open(out / n), np.int16) for n in ("view.png", "pulled.png", "frames/frame_0060.png")
+    )
     moved = np.abs(pulled - view).max(axis=2) > 40
     assert moved.sum() > 200
     assert (np.abs(last - view).max(axis=2) > 40).sum() < moved.sum() / 10
@@ -48,8 +51,12 @@ def test_demo_view_serves_the_viewer_with_the_rod(tmp_path):
     with socket.socket() as probe:  # a free port on loopback
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    process = subprocess.Popen([sys.executable, "-m", "sketchrodgs", "demo", "-o", str(tmp_path / "d"), "--view",
-                                "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "sketchrodgs", "demo", "-o", str(tmp_path / "d"), "--view", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         url, deadline, seen = None, time.monotonic() + 240, []
         while url is None and time.monotonic() < deadline:

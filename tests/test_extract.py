@@ -25,7 +25,7 @@ WANDER_PX = 25.0
 def stroke_along(axis: np.ndarray, camera: Camera = CAMERA, every: int = 40, seed: int = 0) -> np.ndarray:
     """A hand-drawn-like stroke: the projected axis, subsampled, with 1 px jitter."""
     uv, _ = camera.project(axis)
-    points = uv[np.r_[0:len(uv) - 1:every, len(uv) - 1]]  # through both ends
+    points = uv[np.r_[0 : len(uv) - 1 : every, len(uv) - 1]]  # through both ends
     return points + np.random.default_rng(seed).normal(0, 1.0, points.shape)
 
 
@@ -33,7 +33,7 @@ def wandering(stroke: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The stroke with six points in the middle pulled 25 px off the object; returns it and the mask."""
     out = stroke.copy()
     off = np.zeros(len(out), bool)
-    off[len(out) // 2 - 3:len(out) // 2 + 3] = True
+    off[len(out) // 2 - 3 : len(out) // 2 + 3] = True
     out[off, 1] -= WANDER_PX
     return out, off
 
@@ -185,8 +185,11 @@ def test_rod_json_round_trip(tmp_path):
     ex.save(tmp_path / "rod.json", material={"youngs_modulus": 1e6})
     data = json.loads((tmp_path / "rod.json").read_text())
     np.testing.assert_allclose(data["polyline"], ex.polyline, atol=1e-6)
-    assert data["radius"] == ex.radius and data["bindings"] == {"file": "rod.bindings.npz", "count": len(ex.gaussian_ids),
-                                                                "format": 1}
+    assert data["radius"] == ex.radius and data["bindings"] == {
+        "file": "rod.bindings.npz",
+        "count": len(ex.gaussian_ids),
+        "format": 1,
+    }
     back, _ = load_rod(tmp_path / "rod.json")
     for name in ("gaussian_ids", "segment", "t", "offset", "attached"):
         got, want = getattr(back.binding, name), getattr(ex.binding, name)
@@ -214,8 +217,11 @@ def test_rod_files_keep_bindings_small_and_refuse_broken_ones(tmp_path):
     with pytest.raises(SketchRodGSError, match="rod.bindings.npz: the rod file's bindings are missing"):
         load_rod(tmp_path / "rod.json")
     data = json.loads((tmp_path / "rod.json").read_text())
-    for bad, message in (({"file": "../x.npz", "count": 3}, "bindings.file"), ({"count": 3}, "bindings"),
-                         ({"file": "rod.bindings.npz", "count": 3, "format": 9}, "format 9")):
+    for bad, message in (
+        ({"file": "../x.npz", "count": 3}, "bindings.file"),
+        ({"count": 3}, "bindings"),
+        ({"file": "rod.bindings.npz", "count": 3, "format": 9}, "format 9"),
+    ):
         (tmp_path / "bad.json").write_text(json.dumps({**data, "bindings": bad}))
         with pytest.raises(SketchRodGSError, match=message):
             load_rod(tmp_path / "bad.json")
@@ -227,6 +233,7 @@ def test_rod_files_keep_bindings_small_and_refuse_broken_ones(tmp_path):
 
 
 # ---- bad input ------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def straight_scene():
@@ -250,17 +257,26 @@ def test_bad_strokes_are_clear_errors(straight_scene, stroke, error, message):
         extract_rod(tubes.scene, CAMERA, np.asarray(stroke, np.float64), radius=0.01, render=images)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"radius": 0.0}, "radius"), ({"radius": -1.0}, "radius"), ({"radius": 1e-300}, "radius: must be finite and at least"),
-    ({"radius": 1e-9}, "radius: 1e-09 would make .* vertices along the object .* at most 400,000"),
-    ({"radius": 0.01, "alpha": np.nan}, "alpha"), ({"radius": 0.01, "band_px": -2.0}, "band_px"),
-    # a tiny edge length would sample the rod into millions of vertices (and minutes, and gigabytes)
-    ({"radius": 0.01, "edge_length": 1e-9}, "edge_length: 1e-09 would make .* at most 100,000: give a larger edge_length"),
-    ({"radius": 0.01, "edge_length": 1e-300}, "edge_length: 1e-300 would make .*e\\+.* vertices"),
-    ({"radius": 0.01, "smoothing_iterations": 10**9}, "smoothing_iterations: must be a whole number in 0..1000"),
-    ({"radius": 0.01, "smoothing_iterations": -1}, "smoothing_iterations"),
-    ({"radius": 0.01, "smoothing_iterations": 2.5}, "smoothing_iterations"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"radius": 0.0}, "radius"),
+        ({"radius": -1.0}, "radius"),
+        ({"radius": 1e-300}, "radius: must be finite and at least"),
+        ({"radius": 1e-9}, "radius: 1e-09 would make .* vertices along the object .* at most 400,000"),
+        ({"radius": 0.01, "alpha": np.nan}, "alpha"),
+        ({"radius": 0.01, "band_px": -2.0}, "band_px"),
+        # a tiny edge length would sample the rod into millions of vertices (and minutes, and gigabytes)
+        (
+            {"radius": 0.01, "edge_length": 1e-9},
+            "edge_length: 1e-09 would make .* at most 100,000: give a larger edge_length",
+        ),
+        ({"radius": 0.01, "edge_length": 1e-300}, "edge_length: 1e-300 would make .*e\\+.* vertices"),
+        ({"radius": 0.01, "smoothing_iterations": 10**9}, "smoothing_iterations: must be a whole number in 0..1000"),
+        ({"radius": 0.01, "smoothing_iterations": -1}, "smoothing_iterations"),
+        ({"radius": 0.01, "smoothing_iterations": 2.5}, "smoothing_iterations"),
+    ],
+)
 def test_bad_parameters_are_clear_errors(straight_scene, kwargs, message):
     tubes, images = straight_scene
     stroke = stroke_along(tubes.axes[0])

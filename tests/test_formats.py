@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zstandard
-from conftest import DATA, random_scene
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
+from conftest import DATA, random_scene
 from reference.format_encoders import (
     encode_compressed_ply,
     encode_spz,
@@ -27,7 +28,6 @@ from reference.format_encoders import (
     spz_gzip,
     spz_v4,
 )
-
 from sketchrodgs import Camera, GaussianScene, SceneFormatError, load_scene, save_scene
 from sketchrodgs.cli import main
 from sketchrodgs.io import detect_format
@@ -70,6 +70,7 @@ def write(tmp_path: Path, name: str, content: bytes) -> Path:
 
 
 # ---- the real files -----------------------------------------------------------------------------
+
 
 def test_biker_spz_v4_loads_with_readme_count_and_bbox():
     assert BIKER.read_bytes()[:8] == b"NGSP\x04\x00\x00\x00"
@@ -121,8 +122,10 @@ def test_real_files_render_sensibly_and_survive_a_ply_round_trip(tmp_path, path,
 
 
 def test_incomplete_compressed_ply_is_named(tmp_path):
-    raw = (b"ply\nformat binary_little_endian 1.0\nelement chunk 1\nproperty float min_x\n"
-           b"element vertex 1\nproperty uint packed_position\nend_header\n" + bytes(8))
+    raw = (
+        b"ply\nformat binary_little_endian 1.0\nelement chunk 1\nproperty float min_x\n"
+        b"element vertex 1\nproperty uint packed_position\nend_header\n" + bytes(8)
+    )
     assert "compressed PLY 'chunk' element lacks min_y" in load_error(tmp_path, raw, "c.ply")
 
 
@@ -133,6 +136,7 @@ def test_the_inria_reader_hands_compressed_files_on():
 
 
 # ---- SPZ golden files ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("version", [2, 3, 4])
 @pytest.mark.parametrize("degree", [0, 1, 2, 3])
@@ -177,8 +181,9 @@ def _load_with_threads(tmp_path, path, threads):
     """)
     target = tmp_path / f"threads{threads}.npz"
     env = dict(os.environ, SKETCHRODGS_NUM_THREADS=str(threads))
-    run = subprocess.run([sys.executable, "-c", script, str(path), str(target)], env=env, capture_output=True,
-                         text=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-c", script, str(path), str(target)], env=env, capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stderr
     return np.load(target), run.stderr
 
@@ -213,9 +218,19 @@ def test_bytes_after_the_gzip_member_are_ignored_with_a_warning(tmp_path):
 
 def test_spz_golden_bytes_decode_to_exact_values(tmp_path):
     # One splat, written byte by byte from the format description.
-    position = bytes([0x00, 0x08, 0x00,   # x = +2048 / 2^12 = 0.5
-                      0x00, 0xF8, 0xFF,   # y = -2048 / 2^12 = -0.5
-                      0xFF, 0xFF, 0x7F])  # z = (2^23 - 1) / 2^12
+    position = bytes(
+        [
+            0x00,
+            0x08,
+            0x00,  # x = +2048 / 2^12 = 0.5
+            0x00,
+            0xF8,
+            0xFF,  # y = -2048 / 2^12 = -0.5
+            0xFF,
+            0xFF,
+            0x7F,
+        ]
+    )  # z = (2^23 - 1) / 2^12
     alpha, colour, scale = bytes([51]), bytes([0, 128, 255]), bytes([160, 0, 255])
     # smallest three: largest is y (index 1 in x, y, z, w order); x = -0.5 * sqrt(2) * 511/511
     # (sign bit set, magnitude 511... scaled), z = 0, w = +sqrt(1/2) * 256/511
@@ -229,8 +244,9 @@ def test_spz_golden_bytes_decode_to_exact_values(tmp_path):
         scene = load_scene(write(tmp_path, "g.spz", raw))
         np.testing.assert_array_equal(scene.means[0], np.float32([0.5, -0.5, (2**23 - 1) / 4096]))
         assert scene.opacities[0] == np.float32(51 / 255)
-        np.testing.assert_allclose(scene.sh[0, 0], [(0 / 255 - 0.5) / 0.15, (128 / 255 - 0.5) / 0.15, (1 - 0.5) / 0.15],
-                                   rtol=1e-6)
+        np.testing.assert_allclose(
+            scene.sh[0, 0], [(0 / 255 - 0.5) / 0.15, (128 / 255 - 0.5) / 0.15, (1 - 0.5) / 0.15], rtol=1e-6
+        )
         np.testing.assert_allclose(np.log(scene.scales[0]), [0.0, -10.0, 255 / 16 - 10], atol=1e-5)
         x, w = -math.sqrt(0.5), math.sqrt(0.5) * 256 / 511
         y = math.sqrt(1 - x * x - w * w)
@@ -263,14 +279,17 @@ def test_spz_extension_records_are_skipped(tmp_path):
     blocks = spz_blocks(*scene_arrays(scene), version=3)
     record = struct.pack("<II", 0xADBE0002, 12) + np.float32([0.1, 0.2, 3.0]).tobytes()
     plain = load_scene(write(tmp_path, "plain.spz", spz_v4(blocks, 50, 1)))
-    for raw in (spz_v4(blocks, 50, 1, flags=2, extensions=record),
-                spz_gzip(blocks, 50, 1, 3, flags=2, extensions=record)):
+    for raw in (
+        spz_v4(blocks, 50, 1, flags=2, extensions=record),
+        spz_gzip(blocks, 50, 1, 3, flags=2, extensions=record),
+    ):
         got = load_scene(write(tmp_path, "ext.spz", raw))
         np.testing.assert_array_equal(got.means, plain.means)
         np.testing.assert_array_equal(got.sh, plain.sh)
 
 
 # ---- compressed PLY golden files ----------------------------------------------------------------
+
 
 def chunk_ranges(values: np.ndarray) -> np.ndarray:
     """Per-splat (max - min) of each splat's 256-chunk, (N, ...)."""
@@ -321,16 +340,23 @@ def test_compressed_ply_decodes_across_parallel_blocks(tmp_path):
 
 
 def test_compressed_ply_golden_bytes_decode_to_exact_values(tmp_path):
-    header = ("ply\nformat binary_little_endian 1.0\nelement chunk 1\n"
-              + "".join(f"property float {p}\n" for p in (
-                  "min_x min_y min_z max_x max_y max_z min_scale_x min_scale_y min_scale_z "
-                  "max_scale_x max_scale_y max_scale_z").split())
-              + "element vertex 1\n"
-              + "".join(f"property uint packed_{p}\n" for p in ("position", "rotation", "scale", "color"))
-              + "element sh 1\n" + "".join(f"property uchar f_rest_{i}\n" for i in range(9))
-              + "end_header\n").encode()
+    header = (
+        "ply\nformat binary_little_endian 1.0\nelement chunk 1\n"
+        + "".join(
+            f"property float {p}\n"
+            for p in (
+                "min_x min_y min_z max_x max_y max_z min_scale_x min_scale_y min_scale_z "
+                "max_scale_x max_scale_y max_scale_z"
+            ).split()
+        )
+        + "element vertex 1\n"
+        + "".join(f"property uint packed_{p}\n" for p in ("position", "rotation", "scale", "color"))
+        + "element sh 1\n"
+        + "".join(f"property uchar f_rest_{i}\n" for i in range(9))
+        + "end_header\n"
+    ).encode()
     chunk = np.float32([0, -1, 10, 2047, 1, 20, -5, -5, -5, -1, -3, -5]).tobytes()
-    position = (2047 << 21) | (0 << 11) | 1023          # x = max, y = min, z = 1023/2047 of the range
+    position = (2047 << 21) | (0 << 11) | 1023  # x = max, y = min, z = 1023/2047 of the range
     rotation = (2 << 30) | (1023 << 20) | (0 << 10) | 512  # largest is rot_2 (y)
     scale = (0 << 21) | (1023 << 11) | 2047
     color = (255 << 24) | (0 << 16) | (128 << 8) | 64
@@ -352,6 +378,7 @@ def test_compressed_ply_golden_bytes_decode_to_exact_values(tmp_path):
 
 
 # ---- detection and round trips through our writers -----------------------------------------------
+
 
 def test_detection_looks_at_content_not_names(tmp_path):
     scene = bounded_scene(40, 1)
@@ -403,17 +430,23 @@ def test_convert_command(tmp_path, capsys):
 
 
 def test_info_names_the_format():
-    out = subprocess.run([sys.executable, "-m", "sketchrodgs", "info", str(GUITAR), "--json"],
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "sketchrodgs", "info", str(GUITAR), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     summary = json.loads(out.stdout)
     assert summary["format"] == "compressed-ply" and summary["format_name"] == "PlayCanvas compressed PLY"
     assert summary["count"] == 90_854
-    text = subprocess.run([sys.executable, "-m", "sketchrodgs", "info", str(BIKER)],
-                          capture_output=True, text=True, timeout=120).stdout
+    text = subprocess.run(
+        [sys.executable, "-m", "sketchrodgs", "info", str(BIKER)], capture_output=True, text=True, timeout=120
+    ).stdout
     assert "(Niantic SPZ," in text and "152,746" in text
 
 
 # ---- bad input ------------------------------------------------------------------------------------
+
 
 def small_blocks(n: int = 30, degree: int = 1, version: int = 3) -> list[bytes]:
     return spz_blocks(*scene_arrays(bounded_scene(n, degree, seed=1)), version=version)
@@ -433,7 +466,7 @@ def load_error(tmp_path: Path, raw: bytes, name: str = "bad.spz") -> str:
 def test_truncated_spz_is_a_clear_error(tmp_path, version, keep):
     blocks = small_blocks(version=version)
     raw = spz_v4(blocks, 30, 1) if version == 4 else spz_gzip(blocks, 30, 1, version)
-    cut = raw[:max(20, int(len(raw) * keep))]
+    cut = raw[: max(20, int(len(raw) * keep))]
     message = load_error(tmp_path, cut)
     assert any(word in message for word in ("truncated", "ends", "corrupt", "past the end", "outside"))
 
@@ -447,7 +480,10 @@ def test_wrong_spz_versions_in_gzip(tmp_path, version, message):
 
 
 def test_fractional_bits_past_the_24_bit_positions_are_refused(tmp_path):
-    for raw in (spz_gzip(small_blocks(), 30, 1, 3, fractional_bits=255), spz_v4(small_blocks(), 30, 1, fractional_bits=25)):
+    for raw in (
+        spz_gzip(small_blocks(), 30, 1, 3, fractional_bits=255),
+        spz_v4(small_blocks(), 30, 1, fractional_bits=25),
+    ):
         assert "positions are 24-bit fixed point, so at most 24" in load_error(tmp_path, raw)
 
 
@@ -485,7 +521,7 @@ def test_spz_toc_outside_the_file_and_streams_past_the_end(tmp_path):
     assert "outside" in load_error(tmp_path, bytes(raw))
     raw = bytearray(spz_v4(blocks, 30, 1))
     toc_last = 32 + 16 * 5
-    raw[toc_last:toc_last + 8] = struct.pack("<Q", 10**6)  # last stream claims a megabyte
+    raw[toc_last : toc_last + 8] = struct.pack("<Q", 10**6)  # last stream claims a megabyte
     assert "runs past the end" in load_error(tmp_path, bytes(raw))
 
 
@@ -565,14 +601,17 @@ def test_bad_compressed_ply(tmp_path):
     # a NaN chunk bound is reported like any NaN position
     header_end = raw.index(b"end_header\n") + len(b"end_header\n")
     broken = bytearray(raw)
-    broken[header_end:header_end + 4] = np.float32(np.nan).tobytes()  # min_x of chunk 0
+    broken[header_end : header_end + 4] = np.float32(np.nan).tobytes()  # min_x of chunk 0
     assert "NaN" in load_error(tmp_path, bytes(broken), "c.ply")
 
 
 # ---- fuzz -----------------------------------------------------------------------------------------
 
-FUZZ = settings(max_examples=150, deadline=timedelta(seconds=10),
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=150,
+    deadline=timedelta(seconds=10),
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 
 def load_or_format_error(path: Path) -> None:
@@ -605,11 +644,11 @@ def test_fuzz_mutated_spz_and_compressed_files(tmp_path, data_strategy):
         if action == "flip" and raw:
             raw[pos] = data_strategy.draw(st.integers(0, 255))
         elif action == "cut":
-            del raw[pos:pos + data_strategy.draw(st.integers(1, 64))]
+            del raw[pos : pos + data_strategy.draw(st.integers(1, 64))]
         elif action == "insert":
             raw[pos:pos] = data_strategy.draw(st.binary(min_size=1, max_size=16))
         else:  # overwrite a header-sized word with an extreme value
-            raw[pos:pos + 4] = struct.pack("<I", data_strategy.draw(st.sampled_from([0, 1, 255, 2**31, 2**32 - 1])))
+            raw[pos : pos + 4] = struct.pack("<I", data_strategy.draw(st.sampled_from([0, 1, 255, 2**31, 2**32 - 1])))
     load_or_format_error(write(tmp_path, "m.spz" if kind != "compressed" else "m.ply", bytes(raw)))
 
 
@@ -624,7 +663,7 @@ def test_fuzz_mutated_gzip_payloads(tmp_path, data_strategy):
         if data_strategy.draw(st.booleans()):
             payload[pos] = data_strategy.draw(st.integers(0, 255))
         else:
-            del payload[pos:pos + data_strategy.draw(st.integers(1, 32))]
+            del payload[pos : pos + data_strategy.draw(st.integers(1, 32))]
     load_or_format_error(write(tmp_path, "p.spz", gzip.compress(bytes(payload))))
 
 

@@ -67,8 +67,13 @@ def test_frames_are_the_same_for_any_thread_count():
     )
     digests = set()
     for threads in ("1", "3"):
-        out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "SKETCHRODGS_NUM_THREADS": threads},
-                             capture_output=True, text=True, timeout=300)
+        out = subprocess.run(
+            [sys.executable, "-c", code],
+            env={**os.environ, "SKETCHRODGS_NUM_THREADS": threads},
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert out.returncode == 0, out.stderr
         digests.add(out.stdout.strip())
     assert len(digests) == 1

@@ -9,10 +9,10 @@ import numpy as np
 import numpy.lib.recfunctions
 import plyfile
 import pytest
-from conftest import DATA, random_scene
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from conftest import DATA, random_scene
 from sketchrodgs import GaussianScene, SceneFormatError, data, load_scene, save_scene
 from sketchrodgs.io.ply import reference_property_names
 
@@ -101,9 +101,14 @@ def test_bundled_sample_and_test_files_load():
 
 
 SHARED_COUNTS = {
-    "plant.splat": 113_648, "tree_100k.splat": 100_000, "ring_100k.splat": 100_000,
-    "ring_10k.splat": 10_000, "torus_100k.splat": 100_000, "torus_10k.splat": 10_000,
-    "cylinder_100k.splat": 100_000, "donut.ply": 45_624,
+    "plant.splat": 113_648,
+    "tree_100k.splat": 100_000,
+    "ring_100k.splat": 100_000,
+    "ring_10k.splat": 10_000,
+    "torus_100k.splat": 100_000,
+    "torus_10k.splat": 10_000,
+    "cylinder_100k.splat": 100_000,
+    "donut.ply": 45_624,
 }
 
 
@@ -133,6 +138,7 @@ def test_save_refuses_unknown_extension_and_keeps_existing_file(tmp_path):
 
 # ---- bad input --------------------------------------------------------------------------------
 
+
 def ply_bytes(tmp_path: Path, n: int = 10, degree: int = 0) -> bytes:
     save_scene(random_scene(n, sh_degree=degree), tmp_path / "ok.ply")
     return (tmp_path / "ok.ply").read_bytes()
@@ -146,12 +152,15 @@ def header_end(raw: bytes) -> int:
     "mutate, message",
     [
         (lambda raw: raw[:-7], "early end-of-file|truncated"),
-        (lambda raw: raw[:header_end(raw) - 5], "not terminated"),
+        (lambda raw: raw[: header_end(raw) - 5], "not terminated"),
         (lambda raw: b"plx" + raw[3:], "unknown scene format"),
         (lambda raw: raw.replace(b"element vertex 10", b"element vertex 2000000000"), "2000000000 vertex rows"),
         (lambda raw: raw.replace(b"element vertex 10", b"element vertex -3"), "negative count"),
         (lambda raw: raw.replace(b"element vertex 10", b"element vertex 0"), "no rows"),
-        (lambda raw: raw.replace(b"property float opacity", b"property float opaxity"), "missing vertex properties opacity"),
+        (
+            lambda raw: raw.replace(b"property float opacity", b"property float opaxity"),
+            "missing vertex properties opacity",
+        ),
         (lambda raw: raw.replace(b"format binary_little_endian", b"format binary_middle_endian"), "malformed PLY"),
     ],
 )
@@ -166,7 +175,7 @@ def test_bad_ply_is_a_clear_error(tmp_path, mutate, message):
 def test_nan_in_ply_names_row(tmp_path):
     raw = bytearray(ply_bytes(tmp_path))
     start = header_end(bytes(raw)) + 3 * 17 * 4  # row 3 of 17 float columns, field x
-    raw[start:start + 4] = np.float32(np.nan).tobytes()
+    raw[start : start + 4] = np.float32(np.nan).tobytes()
     (tmp_path / "nan.ply").write_bytes(bytes(raw))
     with pytest.raises(SceneFormatError, match=r"nan\.ply: means: NaN or infinite value in row 3"):
         load_scene(tmp_path / "nan.ply")
@@ -216,8 +225,14 @@ def test_errors_pickle_for_multiprocessing(tmp_path):
     import pickle
 
     from sketchrodgs.errors import PathNotFoundError, SceneFileNotFoundError, SimulationError, SketchRodGSError
-    for error in (SketchRodGSError("a"), PathNotFoundError("b"), SimulationError("c"), SceneFormatError("d"),
-                  SceneFileNotFoundError("e")):
+
+    for error in (
+        SketchRodGSError("a"),
+        PathNotFoundError("b"),
+        SimulationError("c"),
+        SceneFormatError("d"),
+        SceneFileNotFoundError("e"),
+    ):
         again = pickle.loads(pickle.dumps(error))
         assert type(again) is type(error) and str(again) == str(error)
 
@@ -282,7 +297,7 @@ def test_fuzz_mutated_valid_files(tmp_path, data_strategy):
         if kind == "flip" and raw:
             raw[pos] = data_strategy.draw(st.integers(0, 255))
         elif kind == "cut":
-            del raw[pos:pos + data_strategy.draw(st.integers(1, 40))]
+            del raw[pos : pos + data_strategy.draw(st.integers(1, 40))]
         else:
             raw[pos:pos] = data_strategy.draw(st.binary(min_size=1, max_size=20))
     (tmp_path / name).write_bytes(bytes(raw))

@@ -25,8 +25,11 @@ CASES_FILE = Path(__file__).parent / "data" / "real_cases" / "cases.json"
 
 
 def plant():
-    return (sketchrodgs.load_scene(sketchrodgs.data.sample("plant")), sketchrodgs.data.sample_camera("plant"),
-            sketchrodgs.data.sample_stroke("plant"))
+    return (
+        sketchrodgs.load_scene(sketchrodgs.data.sample("plant")),
+        sketchrodgs.data.sample_camera("plant"),
+        sketchrodgs.data.sample_stroke("plant"),
+    )
 
 
 def pixels_of(tiles: np.ndarray, camera: Camera) -> np.ndarray:
@@ -46,7 +49,9 @@ def test_band_tiles_render_exactly_what_the_full_render_shows_there():
     colour = render(scene, camera, tiles=tiles, background=(0.2, 0.4, 0.6))
     reference = render(scene, camera, background=(0.2, 0.4, 0.6))
     np.testing.assert_array_equal(colour.rgb[inside], reference.rgb[inside])
-    np.testing.assert_array_equal(colour.rgb[~inside], np.broadcast_to((0.2, 0.4, 0.6), colour.rgb[~inside].shape).astype(np.float32))
+    np.testing.assert_array_equal(
+        colour.rgb[~inside], np.broadcast_to((0.2, 0.4, 0.6), colour.rgb[~inside].shape).astype(np.float32)
+    )
 
 
 def test_a_partial_render_grows_by_the_tiles_asked_for():
@@ -81,8 +86,13 @@ def test_band_render_is_the_same_for_any_thread_count():
     )
     digests = set()
     for threads in ("1", "2", "3"):
-        out = subprocess.run([sys.executable, "-c", code], env={**os.environ, "RAYON_NUM_THREADS": threads},
-                             capture_output=True, text=True, timeout=300)
+        out = subprocess.run(
+            [sys.executable, "-c", code],
+            env={**os.environ, "RAYON_NUM_THREADS": threads},
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert out.returncode == 0, out.stderr
         digests.add(out.stdout.strip())
     assert len(digests) == 1

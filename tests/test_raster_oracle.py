@@ -2,7 +2,7 @@
 implementation of the 3DGS rasteriser (tests/data/oracle_*.npz, see tests/data/README.md).
 
 Float32 against float64 flips a few threshold decisions (1/255, 1e-4, tile rounding), so the
-comparison uses the tolerances RASTER.md gives for a correct float32 implementation.
+comparison uses the tolerances the team's rendering notes give for a correct float32 implementation.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import json
 
 import numpy as np
 import pytest
-from conftest import DATA, PLANT
 
 import sketchrodgs
+from conftest import DATA, PLANT
 from sketchrodgs import Camera
 from sketchrodgs.render import render
 

@@ -41,7 +41,9 @@ def test_case(case: dict) -> None:
         assert (stroke >= 0).all() and (stroke[:, 0] <= camera.width).all() and (stroke[:, 1] <= camera.height).all()
         directions.append(camera.camera_to_world[:3, 2])
     # Each view sees the part from a direction 30-90 degrees (within 0.5) from another view's.
-    angles = {(i, j): np.degrees(np.arccos(np.clip(directions[i] @ directions[j], -1, 1)))
-              for i, j in itertools.combinations(range(len(directions)), 2)}
+    angles = {
+        (i, j): np.degrees(np.arccos(np.clip(directions[i] @ directions[j], -1, 1)))
+        for i, j in itertools.combinations(range(len(directions)), 2)
+    }
     for i in range(len(directions)):
         assert any(29.5 <= a <= 90.5 for pair, a in angles.items() if i in pair)

@@ -23,14 +23,38 @@ JITTER = 10
 # Measured misses (see the module docstring).
 MISSES = {
     "cross_given": {"plant_main_stem", "plant_side_stem_long", "plant_side_stem_right", "tree_branch_tall"},
-    "cross_estimated": {"plant_main_stem", "plant_side_stem_long", "plant_side_stem_right", "tree_branch_tall",
-                        "guitar_stand_leg_right"},
-    "jitter": {"donut_sprinkle_a", "donut_sprinkle_b", "guitar_stand_foot_front", "guitar_stand_leg_left",
-               "guitar_stand_leg_right", "plant_main_stem", "plant_side_stem_left", "plant_side_stem_long",
-               "plant_side_stem_right", "tree_branch_lower_left", "tree_branch_tall"},
-    "radius": {"donut_sprinkle_a", "donut_sprinkle_b", "guitar_neck", "guitar_stand_foot_front", "guitar_stand_leg_left",
-               "guitar_stand_leg_right", "plant_main_stem", "plant_side_stem_long", "plant_side_stem_right",
-               "tree_twig_v"},
+    "cross_estimated": {
+        "plant_main_stem",
+        "plant_side_stem_long",
+        "plant_side_stem_right",
+        "tree_branch_tall",
+        "guitar_stand_leg_right",
+    },
+    "jitter": {
+        "donut_sprinkle_a",
+        "donut_sprinkle_b",
+        "guitar_stand_foot_front",
+        "guitar_stand_leg_left",
+        "guitar_stand_leg_right",
+        "plant_main_stem",
+        "plant_side_stem_left",
+        "plant_side_stem_long",
+        "plant_side_stem_right",
+        "tree_branch_lower_left",
+        "tree_branch_tall",
+    },
+    "radius": {
+        "donut_sprinkle_a",
+        "donut_sprinkle_b",
+        "guitar_neck",
+        "guitar_stand_foot_front",
+        "guitar_stand_leg_left",
+        "guitar_stand_leg_right",
+        "plant_main_stem",
+        "plant_side_stem_long",
+        "plant_side_stem_right",
+        "tree_twig_v",
+    },
 }
 
 
@@ -50,18 +74,26 @@ def _names() -> list[str]:
 
 def per_case(target: str):
     """Parametrise over the cases, strict-xfail where `target` is a measured miss."""
-    return pytest.mark.parametrize("name", [
-        pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=f"{target} not met yet")) if n in MISSES[target] else n
-        for n in _names()
-    ])
+    return pytest.mark.parametrize(
+        "name",
+        [
+            pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=f"{target} not met yet"))
+            if n in MISSES[target]
+            else n
+            for n in _names()
+        ],
+    )
 
 
 def test_no_unjittered_stroke_fails(scored):
     """Every stroke as drawn, with R given, with R estimated and reversed, gives a rod."""
     for name, (views, _) in scored.items():
         for view in views:
-            assert view.given is not None and view.estimated is not None and view.reversed is not None, \
-                (name, view.name, view.errors)
+            assert view.given is not None and view.estimated is not None and view.reversed is not None, (
+                name,
+                view.name,
+                view.errors,
+            )
 
 
 def test_at_most_3_percent_of_jittered_strokes_fail(scored):
@@ -79,27 +111,35 @@ def test_the_reversed_stroke_gives_the_same_rod(scored):
 @per_case("cross_given")
 def test_views_agree_with_radius_given(scored, name):
     score = scored[name][1]
-    assert score.cross_mean <= TARGETS["cross_mean"] and score.cross_max <= TARGETS["cross_max"], \
-        (score.cross_mean, score.cross_max)
+    assert score.cross_mean <= TARGETS["cross_mean"] and score.cross_max <= TARGETS["cross_max"], (
+        score.cross_mean,
+        score.cross_max,
+    )
 
 
 @per_case("cross_estimated")
 def test_views_agree_with_radius_estimated(scored, name):
     score = scored[name][1]
-    assert score.cross_mean_estimated <= TARGETS["cross_mean"] and score.cross_max_estimated <= TARGETS["cross_max"], \
-        (score.cross_mean_estimated, score.cross_max_estimated)
+    assert score.cross_mean_estimated <= TARGETS["cross_mean"] and score.cross_max_estimated <= TARGETS["cross_max"], (
+        score.cross_mean_estimated,
+        score.cross_max_estimated,
+    )
 
 
 @per_case("jitter")
 def test_jittered_strokes_give_the_same_rod(scored, name):
     score = scored[name][1]
-    assert score.jitter_mean <= TARGETS["jitter_mean"] and score.jitter_max <= TARGETS["jitter_max"], \
-        (score.jitter_mean, score.jitter_max)
+    assert score.jitter_mean <= TARGETS["jitter_mean"] and score.jitter_max <= TARGETS["jitter_max"], (
+        score.jitter_mean,
+        score.jitter_max,
+    )
 
 
 @per_case("radius")
 def test_radius_estimate_matches_the_visible_radius(scored, name):
     score = scored[name][1]
-    assert TARGETS["radius_low"] <= score.radius_low and score.radius_high <= TARGETS["radius_high"], \
-        (score.radius_low, score.radius_high)
+    assert TARGETS["radius_low"] <= score.radius_low and score.radius_high <= TARGETS["radius_high"], (
+        score.radius_low,
+        score.radius_high,
+    )
     assert score.radius_spread <= TARGETS["radius_spread"], score.radius_spread

@@ -12,10 +12,10 @@ import time
 
 import numpy as np
 import pytest
-from conftest import DATA, PLANT, random_scene
-from reference.raster_reference import render_reference
 
 import sketchrodgs
+from conftest import DATA, PLANT, random_scene
+from reference.raster_reference import render_reference
 from sketchrodgs import Camera, CameraError, GaussianScene, SketchRodGSError, _core
 from sketchrodgs.render import render
 
@@ -215,7 +215,7 @@ C3 = [-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.37317633259
 
 
 def sh_basis(x: float, y: float, z: float) -> list[float]:
-    """The 16 basis values of RASTER.md 2.3 for the unit direction (x, y, z)."""
+    """The 16 basis values of docs/conventions.md (Spherical harmonics) for the unit direction (x, y, z)."""
     xx, yy, zz = x * x, y * y, z * z
     return [
         SH_C0, -C1 * y, C1 * z, -C1 * x,
@@ -283,7 +283,13 @@ def test_gaussians_on_tile_and_image_borders_match_the_reference():
     rng = np.random.default_rng(7)
     quats = rng.normal(size=(len(uv), 4))
     scales = rng.uniform(0.02, 0.15, size=(len(uv), 3))
-    scene = scene_of(means, scales, rng.uniform(0.3, 0.95, len(uv)), colors=rng.uniform(0, 1, (len(uv), 3)), quats=quats / np.linalg.norm(quats, axis=1, keepdims=True))
+    scene = scene_of(
+        means,
+        scales,
+        rng.uniform(0.3, 0.95, len(uv)),
+        colors=rng.uniform(0, 1, (len(uv), 3)),
+        quats=quats / np.linalg.norm(quats, axis=1, keepdims=True),
+    )
     cam = camera()
     r = render(scene, cam, background=(0.2, 0.2, 0.2))
     ref = render_reference(scene, cam, background=(0.2, 0.2, 0.2))
@@ -366,7 +372,11 @@ def test_render_is_deterministic_across_runs_and_thread_counts():
     for threads in ("1", "3"):
         env = {**os.environ, "RAYON_NUM_THREADS": threads}
         out = subprocess.run(
-            [sys.executable, "-c", code, os.path.dirname(__file__)], env=env, capture_output=True, text=True, timeout=300
+            [sys.executable, "-c", code, os.path.dirname(__file__)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
         )
         assert out.returncode == 0, out.stderr
         assert out.stdout.strip() == digest, f"{threads} threads gave a different image"
@@ -412,9 +422,7 @@ def test_render_releases_the_gil():
 
 
 def raw_call(scene, **overrides):
-    args = dict(
-        world_to_camera=np.eye(4), width=64, height=48, fx=100.0, fy=100.0, cx=32.0, cy=24.0
-    )
+    args = dict(world_to_camera=np.eye(4), width=64, height=48, fx=100.0, fy=100.0, cx=32.0, cy=24.0)
     args.update(overrides)
     return _core.rasterize(
         scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, args["world_to_camera"],
@@ -434,7 +442,10 @@ def raw_call(scene, **overrides):
         ("width", {"width": 16385}),
         ("world_to_camera", {"world_to_camera": np.diag([2.0, 1.0, 1.0, 1.0])}),
         ("world_to_camera", {"world_to_camera": np.diag([1.0, 1.0, -1.0, 1.0])}),
-        ("world_to_camera", {"world_to_camera": np.array([[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])}),
+        (
+            "world_to_camera",
+            {"world_to_camera": np.array([[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])},
+        ),
         ("world_to_camera", {"world_to_camera": np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1.0]])}),
     ],
 )
@@ -461,14 +472,44 @@ def test_largest_image_side_renders():
 def test_bad_arrays_are_refused_naming_the_array():
     scene = random_scene(10)
     with pytest.raises(SketchRodGSError, match="scales"):
-        _core.rasterize(scene.means, scene.scales[:5], scene.quats, scene.opacities, scene.sh, np.eye(4), 8, 8, 10.0, 10.0, 4.0, 4.0)
+        _core.rasterize(
+            scene.means, scene.scales[:5], scene.quats, scene.opacities, scene.sh, np.eye(4), 8, 8, 10.0, 10.0, 4.0, 4.0
+        )
     with pytest.raises(SketchRodGSError, match="sh"):
-        _core.rasterize(scene.means, scene.scales, scene.quats, scene.opacities, np.zeros((10, 5, 3), np.float32), np.eye(4), 8, 8, 10.0, 10.0, 4.0, 4.0)
+        _core.rasterize(
+            scene.means,
+            scene.scales,
+            scene.quats,
+            scene.opacities,
+            np.zeros((10, 5, 3), np.float32),
+            np.eye(4),
+            8,
+            8,
+            10.0,
+            10.0,
+            4.0,
+            4.0,
+        )
     with pytest.raises(SketchRodGSError, match="means"):
         strided = np.zeros((10, 6), np.float32)[:, ::2]
-        _core.rasterize(strided, scene.scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 8, 8, 10.0, 10.0, 4.0, 4.0)
+        _core.rasterize(
+            strided, scene.scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 8, 8, 10.0, 10.0, 4.0, 4.0
+        )
     with pytest.raises(TypeError):
-        _core.rasterize(scene.means.astype(np.float64), scene.scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 8, 8, 10.0, 10.0, 4.0, 4.0)
+        _core.rasterize(
+            scene.means.astype(np.float64),
+            scene.scales,
+            scene.quats,
+            scene.opacities,
+            scene.sh,
+            np.eye(4),
+            8,
+            8,
+            10.0,
+            10.0,
+            4.0,
+            4.0,
+        )
     for background in ((0, 0), ("a", 0, 0), (0, 0, float("nan")), 3):
         with pytest.raises(SketchRodGSError, match="background"):
             render(scene, camera(), background=background)
@@ -479,10 +520,14 @@ def test_non_finite_gaussians_in_raw_arrays_are_dropped_not_fatal():
     means = scene.means.copy()
     means[1] = np.nan
     scales = scene.scales.copy()
-    out = _core.rasterize(means, scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 64, 48, 100.0, 100.0, 32.5, 24.5)
+    out = _core.rasterize(
+        means, scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 64, 48, 100.0, 100.0, 32.5, 24.5
+    )
     assert out["n_visible"] == 1 and out["index"][24, 32] == 0
     scales[0] = np.inf
-    out = _core.rasterize(means, scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 64, 48, 100.0, 100.0, 32.5, 24.5)
+    out = _core.rasterize(
+        means, scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 64, 48, 100.0, 100.0, 32.5, 24.5
+    )
     assert out["n_visible"] == 0 and (out["index"] == -1).all()
 
 
@@ -490,7 +535,9 @@ def test_non_finite_gaussians_in_raw_arrays_are_dropped_not_fatal():
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "sketchrodgs", "render", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "sketchrodgs", "render", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 def read_png(path) -> np.ndarray:
@@ -538,7 +585,11 @@ def test_cli_reads_a_3dgs_cameras_json(tmp_path):
 
 def test_cli_errors_are_one_line(tmp_path):
     base = [str(PLANT), "--camera", str(DATA / "cameras_plant.json")]
-    for extra in (["--view", "7", "-o", str(tmp_path / "a.png")], ["--view", "nope", "-o", str(tmp_path / "a.png")], []):
+    for extra in (
+        ["--view", "7", "-o", str(tmp_path / "a.png")],
+        ["--view", "nope", "-o", str(tmp_path / "a.png")],
+        [],
+    ):
         out = run_cli(*base, *extra)
         assert out.returncode == 1 and len(out.stderr.strip().splitlines()) == 1, out.stderr
     out = run_cli(str(PLANT), "--camera", str(tmp_path / "missing.json"), "-o", str(tmp_path / "a.png"))

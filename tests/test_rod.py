@@ -253,7 +253,7 @@ def test_a_held_vertex_is_not_grabbed_and_a_world_is_not_shared_across_threads()
     stepping.start()
     while stepping.is_alive():
         try:
-            rod.positions
+            _ = rod.positions
         except SimulationError as err:
             errors.append(str(err))
     stepping.join()
@@ -343,7 +343,7 @@ def test_rods_in_one_world_step_together_as_if_alone():
     world.remove(a)
     assert b.index == 0 and len(world) == 1
     with pytest.raises(SimulationError, match="removed"):
-        a.positions
+        _ = a.positions
 
 
 def test_frames_are_rotations_with_the_tangent_third_and_vertex_frames_average_them():

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import random_scene
 
+from conftest import random_scene
 from sketchrodgs import GaussianScene, SceneFormatError
 
 

@@ -21,8 +21,13 @@ AXIS = np.stack([np.linspace(-0.45, 0.45, 91), np.full(91, 0.05), np.zeros(91)],
 
 def blobs(centres: np.ndarray, size: float = 0.002) -> dict[str, np.ndarray]:
     n = len(centres)
-    return {"means": centres, "scales": np.full((n, 3), size), "quats": np.tile([1.0, 0, 0, 0], (n, 1)),
-            "opacities": np.full(n, 0.8), "colors": np.full((n, 3), 0.5)}
+    return {
+        "means": centres,
+        "scales": np.full((n, 3), size),
+        "quats": np.tile([1.0, 0, 0, 0], (n, 1)),
+        "opacities": np.full(n, 0.8),
+        "colors": np.full((n, 3), 0.5),
+    }
 
 
 def grid(low, high, step: float) -> np.ndarray:
@@ -33,16 +38,24 @@ def grid(low, high, step: float) -> np.ndarray:
 def with_extras(**extras: np.ndarray) -> tuple[GaussianScene, dict[str, slice]]:
     """The synthetic straight tube (R = 0.01, axis AXIS) plus the given extra point sets."""
     tube = synthetic.tube_scene([synthetic.straight], radius=R, clutter=0, seed=2).scene
-    parts = [{"means": tube.means, "scales": tube.scales, "quats": tube.quats, "opacities": tube.opacities,
-              "colors": tube.colors}]
+    parts = [
+        {
+            "means": tube.means,
+            "scales": tube.scales,
+            "quats": tube.quats,
+            "opacities": tube.opacities,
+            "colors": tube.colors,
+        }
+    ]
     rows, start = {}, len(tube)
     for name, points in extras.items():
         parts.append(blobs(points))
         rows[name] = slice(start, start + len(points))
         start += len(points)
     merged = {k: np.concatenate([np.asarray(p[k], np.float64) for p in parts]) for k in parts[0]}
-    scene = GaussianScene.from_colors(merged["means"], merged["scales"], merged["quats"], merged["opacities"],
-                                      merged["colors"])
+    scene = GaussianScene.from_colors(
+        merged["means"], merged["scales"], merged["quats"], merged["opacities"], merged["colors"]
+    )
     return scene, rows
 
 

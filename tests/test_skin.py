@@ -10,9 +10,9 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from sketchrodgs import Camera, SketchRodGSError, extract_rod, load_scene, render, save_scene, synthetic
+from sketchrodgs.rig import Rig
 from sketchrodgs.rod import Rod
 from sketchrodgs.segment import segment_and_bind
-from sketchrodgs.rig import Rig
 from sketchrodgs.skin import BoundRod, matrices_to_quats, skin, skin_into
 
 CAMERA = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, 1, 0), width=960, height=540, fov_y_deg=40)
@@ -148,8 +148,9 @@ def test_covariances_stretch_with_the_rod(tube, factor, tolerance):
     assert error.max() < tolerance, error.max()
     # past the rod's ends the tube goes on 5 R: an attached part, moving with the end
     within = ids[(bound.t > 0) & (bound.t < 1) & ~bound.attached]
-    np.testing.assert_allclose(moved.means[within, 0] - start[0], factor * (tubes.scene.means[within, 0] - start[0]),
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        moved.means[within, 0] - start[0], factor * (tubes.scene.means[within, 0] - start[0]), atol=1e-5
+    )
 
 
 def test_motion_eases_in_at_a_clamped_end(tube):
@@ -194,7 +195,9 @@ def test_deformed_ply_round_trips(tube, tmp_path):
     ply = plyfile.PlyData.read(tmp_path / "bent.ply")
     assert ply["vertex"].count == len(tubes.scene)
     save_scene(tubes.scene, tmp_path / "rest.ply")
-    assert [p.name for p in ply["vertex"].properties] == [p.name for p in plyfile.PlyData.read(tmp_path / "rest.ply")["vertex"].properties]
+    assert [p.name for p in ply["vertex"].properties] == [
+        p.name for p in plyfile.PlyData.read(tmp_path / "rest.ply")["vertex"].properties
+    ]
     again = load_scene(tmp_path / "bent.ply")
     np.testing.assert_array_equal(again.means, bent.means)
 

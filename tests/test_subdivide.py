@@ -12,9 +12,9 @@ from sketchrodgs import Camera, data, extract_rod, load_scene, render
 from sketchrodgs import subdivide as sd
 from sketchrodgs.deform_metrics import psnr
 from sketchrodgs.realcases import load_cases
+from sketchrodgs.rig import Rig
 from sketchrodgs.rod import Rod
 from sketchrodgs.scene import GaussianScene
-from sketchrodgs.rig import Rig
 
 CASES = Path(__file__).parent / "data" / "real_cases" / "cases.json"
 
@@ -43,8 +43,9 @@ def needle_scene() -> GaussianScene:
     quats = rng.normal(size=(n, 4))
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)
     scales = np.stack([rng.uniform(0.02, 0.08, n), rng.uniform(0.001, 0.004, n), rng.uniform(0.001, 0.004, n)], axis=1)
-    return GaussianScene.from_colors(rng.normal(scale=0.1, size=(n, 3)), scales, quats, rng.uniform(0.1, 1.0, n),
-                                     rng.uniform(0.2, 0.9, (n, 3)))
+    return GaussianScene.from_colors(
+        rng.normal(scale=0.1, size=(n, 3)), scales, quats, rng.uniform(0.1, 1.0, n), rng.uniform(0.2, 0.9, (n, 3))
+    )
 
 
 def test_split_keeps_the_rows_and_maps_the_pieces_back():
@@ -54,7 +55,7 @@ def test_split_keeps_the_rows_and_maps_the_pieces_back():
     new, source, pieces = sd.split(scene, rows, counts)
     assert len(new) == len(scene) + (2 - 1) + (4 - 1) + (16 - 1)
     np.testing.assert_array_equal(source[: len(scene)], np.arange(len(scene)))
-    assert sorted(np.bincount(source[len(scene):], minlength=len(scene))[[3, 10, 11, 40]]) == [0, 1, 3, 15]
+    assert sorted(np.bincount(source[len(scene) :], minlength=len(scene))[[3, 10, 11, 40]]) == [0, 1, 3, 15]
     assert set(pieces) == set(np.flatnonzero(np.isin(source, [3, 10, 40])))
     untouched = np.setdiff1d(np.arange(len(scene)), [3, 10, 40])
     for field in ("means", "scales", "quats", "opacities", "sh"):
@@ -66,14 +67,21 @@ def test_split_keeps_the_rows_and_maps_the_pieces_back():
         major = int(np.argmax(scene.scales[parent]))
         assert np.all(new.scales[mine, major] < scene.scales[parent, major])
         minor = [i for i in range(3) if i != major]
-        np.testing.assert_array_equal(new.scales[mine][:, minor], np.repeat(scene.scales[[parent]][:, minor], len(mine), 0))
+        np.testing.assert_array_equal(
+            new.scales[mine][:, minor], np.repeat(scene.scales[[parent]][:, minor], len(mine), 0)
+        )
         # the pieces' centres lie on the parent's major axis, symmetric about its centre
         np.testing.assert_allclose(new.means[mine].mean(axis=0), scene.means[parent], atol=1e-6)
 
 
 def test_only_needles_along_the_rod_are_split():
-    scene = GaussianScene.from_colors(np.zeros((3, 3)), np.array([[0.05, 0.002, 0.002]] * 3),
-                                      np.array([[1.0, 0, 0, 0]] * 3), np.full(3, 0.8), np.full((3, 3), 0.5))
+    scene = GaussianScene.from_colors(
+        np.zeros((3, 3)),
+        np.array([[0.05, 0.002, 0.002]] * 3),
+        np.array([[1.0, 0, 0, 0]] * 3),
+        np.full(3, 0.8),
+        np.full((3, 3), 0.5),
+    )
     along = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.sqrt(0.5), np.sqrt(0.5), 0.0]])
     counts = sd.piece_counts(scene, np.arange(3), along, edge_length=0.031)
     assert counts[0] == 10  # 3-sigma length 0.3 over edges of 0.031
@@ -102,8 +110,9 @@ def guitar_neck():
     scenes, cases = load_cases(CASES)
     case = next(c for c in cases if c["name"] == "guitar_neck")
     view = next(v for v in case["views"] if v["name"] == "az270")
-    extraction = extract_rod(scenes["guitar"], Camera.from_dict(view["camera"]), np.asarray(view["stroke"]),
-                             radius=case["radius"])
+    extraction = extract_rod(
+        scenes["guitar"], Camera.from_dict(view["camera"]), np.asarray(view["stroke"]), radius=case["radius"]
+    )
     return scenes["guitar"], extraction, {v["name"]: Camera.from_dict(v["camera"]) for v in case["views"]}
 
 
@@ -114,8 +123,11 @@ def test_the_guitar_neck_renders_the_same_at_rest_seen_from_the_side(guitar_neck
     assert values[0] >= 45.0, values
 
 
-@pytest.mark.xfail(strict=True, reason="seen obliquely, a string split in pieces sorts with the fretboard piece by "
-                   "piece, the unsplit string by its centre only (docs/deformation.md): 40-41 dB")
+@pytest.mark.xfail(
+    strict=True,
+    reason="seen obliquely, a string split in pieces sorts with the fretboard piece by "
+    "piece, the unsplit string by its centre only (docs/deformation.md): 40-41 dB",
+)
 def test_the_guitar_neck_renders_the_same_at_rest_seen_obliquely(guitar_neck):
     scene, extraction, cameras = guitar_neck
     _, values = rest_psnr(scene, extraction, [cameras["az270"], cameras["az320"]])

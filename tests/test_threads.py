@@ -25,7 +25,9 @@ print(_core.num_threads(), segment.sum(), float(t.sum()), float(distance[np.isfi
 
 def run_with_threads(threads: str) -> list[str]:
     env = dict(os.environ, SKETCHRODGS_NUM_THREADS=threads)
-    out = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=120, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=120, check=True
+    )
     return out.stdout.split()
 
 

@@ -76,6 +76,7 @@ def server():
 
 # ----- camera and pointer -------------------------------------------------------------------
 
+
 def random_pose(seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     xyzw = Rotation.random(random_state=seed).as_quat()
@@ -107,8 +108,9 @@ def test_canvas_edges_are_the_image_edges():
     np.testing.assert_allclose(uv[0], [camera.width, 0], atol=1e-6 * camera.width + 0.5)
     # the pointer there, in viser's normalised canvas coordinates, is that pixel point
     np.testing.assert_allclose(screen_to_pixels(np.array([[1.0, 0.0]]), camera)[0], [camera.width, 0])
-    np.testing.assert_allclose(screen_to_pixels(np.array([[0.5, 0.5]]), camera)[0],
-                               [camera.width / 2, camera.height / 2])
+    np.testing.assert_allclose(
+        screen_to_pixels(np.array([[0.5, 0.5]]), camera)[0], [camera.width / 2, camera.height / 2]
+    )
 
 
 def test_screen_pixels_and_unproject_round_trip():
@@ -124,8 +126,9 @@ def test_screen_pixels_and_unproject_round_trip():
 def test_viser_view_of_a_camera_gives_back_that_camera():
     camera = Camera.look_at((1, 2, -3), (0.2, 0.1, 0.5), up=(0, -1, 0), width=800, height=600, fov_y_deg=45)
     view = viser_view(camera, look_distance=2.0)
-    again = Camera.look_at(view.position, view.look_at, up=view.up, width=800, height=600,
-                           fov_y_deg=math.degrees(view.fov_y))
+    again = Camera.look_at(
+        view.position, view.look_at, up=view.up, width=800, height=600, fov_y_deg=math.degrees(view.fov_y)
+    )
     np.testing.assert_allclose(again.world_to_camera, camera.world_to_camera, atol=1e-9)
     assert np.linalg.norm(np.subtract(view.look_at, view.position)) == pytest.approx(2.0)
 
@@ -140,6 +143,7 @@ def test_bad_viser_camera_is_refused():
 
 
 # ----- splats ---------------------------------------------------------------------------------
+
 
 def test_covariances_are_r_s2_rt(ring):
     rng = np.random.default_rng(1)
@@ -182,6 +186,7 @@ def test_colours_are_the_baked_dc_term(ring):
 
 
 # ----- rods -----------------------------------------------------------------------------------
+
 
 def pull(rods: RodSet, rod_id: int, offset=(0.0, 0.12, 0.0), frames: int = 20) -> int:
     entry = rods.get(rod_id)
@@ -304,6 +309,7 @@ def test_rod_outside_the_scene_is_refused(ring, ring_rod):
 
 # ----- display ----------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("update", ["exact", "segments"])
 def test_display_sends_where_the_gaussians_are(server, ring, ring_rod, update):
     rods = RodSet(ring, skin_each_frame=update == "exact")
@@ -351,6 +357,7 @@ def test_display_sends_where_the_gaussians_are(server, ring, ring_rod, update):
 
 # ----- sketch -----------------------------------------------------------------------------------
 
+
 def test_stroke_samples_and_extraction(ring):
     # the ring's camera as viser would report it: camera-to-world rotation and centre
     c2w = RING_CAMERA.camera_to_world
@@ -384,6 +391,7 @@ def test_frame_timings():
 
 # ----- the app ----------------------------------------------------------------------------------
 
+
 def test_app_exports_and_modes(tmp_path, ring, ring_rod):
     app = ViewerApp(ring, port=free_port(), rods=[ring_rod], up="+y", output_dir=tmp_path, fps=60)
     try:
@@ -410,8 +418,10 @@ def test_app_exports_and_modes(tmp_path, ring, ring_rod):
         np.testing.assert_allclose(loaded.polyline, ring_rod.polyline)
         assert material["radius"] == pytest.approx(ring_rod.radius)
         app.reset()
-        assert np.abs(entry.rod.positions - entry.rod.rest_positions).max() == 0.0 or \
-            np.abs(app.rods.entries[0].rod.positions - entry.rod.rest_positions).max() < 1e-12
+        assert (
+            np.abs(entry.rod.positions - entry.rod.rest_positions).max() == 0.0
+            or np.abs(app.rods.entries[0].rod.positions - entry.rod.rest_positions).max() < 1e-12
+        )
         with pytest.raises(SketchRodGSError, match="no browser"):
             app.screenshot()
         app.remove_rod(app.rods.entries[0].id)
@@ -482,13 +492,32 @@ def test_app_refuses_bad_settings(ring):
 
 # ----- the command ----------------------------------------------------------------------------
 
+
 def test_view_command_serves_the_page_on_loopback(tmp_path, ring_rod):
     port = free_port()
     ring_rod.save(tmp_path / "rod.json")
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    process = subprocess.Popen([sys.executable, "-m", "sketchrodgs", "view", "sample:ring", "--port", str(port),
-                                "--up", "+y", "-o", str(tmp_path), "--rod", str(tmp_path / "rod.json")],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sketchrodgs",
+            "view",
+            "sample:ring",
+            "--port",
+            str(port),
+            "--up",
+            "+y",
+            "-o",
+            str(tmp_path),
+            "--rod",
+            str(tmp_path / "rod.json"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     try:
         line, deadline = "", time.monotonic() + 60
         while "sketchrodgs viewer:" not in line:
@@ -508,9 +537,17 @@ def test_view_command_serves_the_page_on_loopback(tmp_path, ring_rod):
 
 
 def test_view_command_usage_errors():
-    result = subprocess.run([sys.executable, "-m", "sketchrodgs", "view", "sample:ring", "--port", "70000"],
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [sys.executable, "-m", "sketchrodgs", "view", "sample:ring", "--port", "70000"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 2 and "port" in result.stderr
-    result = subprocess.run([sys.executable, "-m", "sketchrodgs", "view", "missing.ply", "--port", str(free_port())],
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [sys.executable, "-m", "sketchrodgs", "view", "missing.ply", "--port", str(free_port())],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 1 and len(result.stderr.strip().splitlines()) == 1

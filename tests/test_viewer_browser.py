@@ -23,8 +23,16 @@ from sketchrodgs.viewer import ViewerApp, camera_from_viser
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium")) if p and os.path.exists(p)), None)
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)")
 
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 VIEWPORT = {"width": 640, "height": 480}
 # The ring (a tube on the ellipse 0.455 x 0.136 in the XY plane) seen face-on from -z, shifted to
 # the lower left of the page: viser's panel floats on the right, a notice may sit top left.
@@ -53,8 +61,9 @@ def free_port() -> int:
 def session(tmp_path_factory) -> Iterator[tuple[ViewerApp, Page, object]]:
     scene = load_scene(data.sample("ring"))
     start = Camera.look_at(EYE, LOOK_AT, up=(0.0, 1.0, 0.0), width=640, height=480, fov_y_deg=60.0)
-    app = ViewerApp(scene, host="127.0.0.1", port=free_port(), up="+y", camera=start,
-                    output_dir=tmp_path_factory.mktemp("viewer"))
+    app = ViewerApp(
+        scene, host="127.0.0.1", port=free_port(), up="+y", camera=start, output_dir=tmp_path_factory.mktemp("viewer")
+    )
     try:
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=FLAGS, headless=True, timeout=30_000)
@@ -63,7 +72,9 @@ def session(tmp_path_factory) -> Iterator[tuple[ViewerApp, Page, object]]:
                 page.set_default_timeout(15_000)
                 # half-resolution drawing buffer: software WebGL draws each frame 4x faster
                 page.goto(f"{app.url}/?fixedDpr=0.5")
-                client = wait_for(lambda: next(iter(app.server.get_clients().values()), None), 20, "the page to connect")
+                client = wait_for(
+                    lambda: next(iter(app.server.get_clients().values()), None), 20, "the page to connect"
+                )
                 wait_for(lambda: _camera_known(client), 20, "the browser's camera")
                 # the page opens at the app's initial camera
                 wait_for(lambda: np.allclose(client.camera.position, EYE, atol=1e-4), 10, "the initial camera")
@@ -116,8 +127,9 @@ def to_page(page: Page, camera: Camera, points: np.ndarray) -> np.ndarray:
     box = canvas_box(page)
     uv, depth = camera.project(np.asarray(points, np.float64))
     assert (depth > 0).all()
-    return np.stack([box["x"] + uv[:, 0] / camera.width * box["width"],
-                     box["y"] + uv[:, 1] / camera.height * box["height"]], axis=1)
+    return np.stack(
+        [box["x"] + uv[:, 0] / camera.width * box["width"], box["y"] + uv[:, 1] / camera.height * box["height"]], axis=1
+    )
 
 
 def drag(page: Page, path: np.ndarray, pause: float = 0.06, hold: float = 0.0) -> None:
@@ -197,7 +209,7 @@ def test_pull_moves_rod_and_gaussians_and_release_brings_them_back(session):
     node = app.display._rods[entry.id].splats[0]
     vertex = len(rest) // 2
     camera = client_camera(client, width)
-    start = to_page(page, camera, rest[vertex:vertex + 1])[0]
+    start = to_page(page, camera, rest[vertex : vertex + 1])[0]
     path = start + np.outer(np.linspace(0, 1, 6), [0.0, -45.0])  # up the screen by 45 px
 
     page.mouse.move(*start)
@@ -206,8 +218,11 @@ def test_pull_moves_rod_and_gaussians_and_release_brings_them_back(session):
         page.mouse.move(float(x), float(y))
         time.sleep(0.06)
     try:
-        wait_for(lambda: np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex]) > 0.05, 10,
-                 "the grabbed vertex to follow the pointer")
+        wait_for(
+            lambda: np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex]) > 0.05,
+            10,
+            "the grabbed vertex to follow the pointer",
+        )
         time.sleep(0.5)
         moved = np.asarray(entry.rod.positions)
         assert moved[vertex, 1] - rest[vertex, 1] > 0.05  # up the screen is +y in this view

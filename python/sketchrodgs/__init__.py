@@ -21,9 +21,9 @@ from .errors import (
 from .extract import Extraction, extract_rod
 from .io import load_scene, save_scene
 from .render import RenderResult, render
+from .rig import Rig
 from .rod import Rod, RodParams, World
 from .scene import GaussianScene
-from .rig import Rig
 from .skin import BoundRod, skin
 
 # A forked child has none of the worker threads of the parent's pool; it builds its own.

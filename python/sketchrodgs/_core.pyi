@@ -8,7 +8,13 @@ import numpy.typing as npt
 __version__: str
 
 class SketchRodGSError(ValueError): ...
-class PathNotFoundError(SketchRodGSError): ...
+
+class PathNotFoundError(SketchRodGSError):
+    # set by extract_rod on the errors it raises (what was found, for drawing it)
+    stroke: npt.NDArray[np.float32]
+    pixel_path: list[npt.NDArray[np.int64]]
+    lost_at: list[tuple[int, int]]
+
 class SimulationError(SketchRodGSError): ...
 
 def trace_stroke(
@@ -22,7 +28,9 @@ def trace_stroke(
     cover_px: float = 10.0,
     focal_px: float = 0.0,
     alpha: npt.NDArray[np.float32] | None = None,
-) -> dict[str, object]: ...
+    rendered: npt.NDArray[np.bool_] | None = None,
+    missed: npt.NDArray[np.bool_] | None = None,
+) -> dict[str, Any]: ...
 def estimate_radius(
     index: npt.NDArray[np.int32],
     depth: npt.NDArray[np.float32],
@@ -30,6 +38,8 @@ def estimate_radius(
     stroke: npt.NDArray[np.float32],
     focal_px: float,
     band_px: float = 0.0,
+    rendered: npt.NDArray[np.bool_] | None = None,
+    missed: npt.NDArray[np.bool_] | None = None,
 ) -> float: ...
 def nearest_on_polyline(
     polyline: npt.NDArray[np.float32], points: npt.NDArray[np.float32], reach: float
@@ -55,9 +65,38 @@ def rasterize(
     fy: float,
     cx: float,
     cy: float,
-    background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    background: tuple[float, float, float] = ...,
     index_only: bool = False,
+    tiles: npt.NDArray[np.bool_] | None = None,
 ) -> dict[str, Any]: ...
+
+@final
+class RetainedRender:
+    def __new__(
+        cls,
+        means: npt.NDArray[np.float32],
+        scales: npt.NDArray[np.float32],
+        quats: npt.NDArray[np.float32],
+        opacities: npt.NDArray[np.float32],
+        sh: npt.NDArray[np.float32],
+        world_to_camera: npt.NDArray[np.float64],
+        width: int,
+        height: int,
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        moving: npt.NDArray[np.int64],
+        background: tuple[float, float, float] = ...,
+        index_only: bool = False,
+    ) -> RetainedRender: ...
+    def frame(
+        self, means: npt.NDArray[np.float32], scales: npt.NDArray[np.float32], quats: npt.NDArray[np.float32]
+    ) -> dict[str, Any]: ...
+
+def rows_in_box(
+    points: npt.NDArray[np.float32], low: tuple[float, float, float], high: tuple[float, float, float]
+) -> npt.NDArray[np.int64]: ...
 def num_threads() -> int: ...
 def _reset_pool_after_fork() -> None: ...
 
@@ -122,7 +161,9 @@ class RodWorld:
     def forces(self, rod: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
     def params(self, rod: int) -> dict[str, Any]: ...
 
-def linked_components(points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], link: float) -> npt.NDArray[np.int64]: ...
+def linked_components(
+    points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], link: float
+) -> npt.NDArray[np.int64]: ...
 def linked_to(
     points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], source: int, target: int, link: float
 ) -> npt.NDArray[np.int64]: ...
@@ -145,18 +186,18 @@ def skin_scatter(
     scales: npt.NDArray[np.float32],
 ) -> None: ...
 
-F32 = npt.NDArray[np.float32]
+_F32 = npt.NDArray[np.float32]
 # means (N, 3), scales (N, 3), quats (N, 4), opacities (N,), sh (N, K, 3), filled by the decoders
-SceneArrays = tuple[F32, F32, F32, F32, F32]
+_SceneArrays = tuple[_F32, _F32, _F32, _F32, _F32]
 
-def gunzip_into(raw: npt.NDArray[np.uint8], out: npt.NDArray[np.uint8]) -> int | None: ...
+def gunzip_into(raw: npt.NDArray[np.uint8], out: npt.NDArray[np.uint8]) -> tuple[int, bool] | None: ...
 def decode_spz(
-    payload: npt.NDArray[np.uint8], version: int, sh_bytes_per_splat: int, fractional_bits: int, out: SceneArrays
+    payload: npt.NDArray[np.uint8], version: int, sh_bytes_per_splat: int, fractional_bits: int, out: _SceneArrays
 ) -> None: ...
 def decode_compressed_ply(
-    bounds: npt.NDArray[np.float64], packed: npt.NDArray[np.uint8], sh_rest: npt.NDArray[np.uint8], out: SceneArrays
+    bounds: npt.NDArray[np.float64], packed: npt.NDArray[np.uint8], sh_rest: npt.NDArray[np.uint8], out: _SceneArrays
 ) -> None: ...
-def decode_splat(records: npt.NDArray[np.uint8], out: SceneArrays) -> None: ...
+def decode_splat(records: npt.NDArray[np.uint8], out: _SceneArrays) -> None: ...
 def scene_summary(
-    means: F32, scales: F32, quats: F32, opacities: F32, sh: F32
+    means: _F32, scales: _F32, quats: _F32, opacities: _F32, sh: _F32
 ) -> tuple[list[bool], float, tuple[float, float], tuple[float, float]]: ...

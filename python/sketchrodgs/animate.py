@@ -16,9 +16,9 @@ import numpy as np
 
 from .errors import SketchRodGSError
 from .extract import Extraction
+from .rig import DEFAULT_END_RAMP, Rig
 from .rod import Rod, RodParams, World
 from .scene import GaussianScene
-from .rig import DEFAULT_END_RAMP, Rig
 from .skin import skin_into
 
 logger = logging.getLogger("sketchrodgs")
@@ -104,9 +104,15 @@ class Animation:
         means, quats, scales: its arrays now, updated by every frame.
     """
 
-    def __init__(self, scene: GaussianScene, extractions: Sequence[Extraction],
-                 params: RodParams | Sequence[RodParams] = RodParams(), clamp_ends: bool = True,
-                 subdivide: bool = True, end_ramp: float = DEFAULT_END_RAMP) -> None:
+    def __init__(
+        self,
+        scene: GaussianScene,
+        extractions: Sequence[Extraction],
+        params: RodParams | Sequence[RodParams] = RodParams(),
+        clamp_ends: bool = True,
+        subdivide: bool = True,
+        end_ramp: float = DEFAULT_END_RAMP,
+    ) -> None:
         if not extractions:
             raise SketchRodGSError("no rods to animate")
         per_rod = [params] * len(extractions) if isinstance(params, RodParams) else list(params)
@@ -116,7 +122,8 @@ class Animation:
         for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
             if len(extraction.gaussian_ids) and extraction.gaussian_ids.max() >= len(scene):
                 raise SketchRodGSError(
-                    f"rod {k}: binds Gaussian {int(extraction.gaussian_ids.max())} but the scene has {len(scene)}")
+                    f"rod {k}: binds Gaussian {int(extraction.gaussian_ids.max())} but the scene has {len(scene)}"
+                )
             material = RodParams(**{**p.to_dict(), "radius": extraction.radius})
             rod = Rod(extraction.polyline, params=material, world=self.world)
             if clamp_ends:

@@ -43,18 +43,19 @@ def stroke_distance(points_px: np.ndarray, stroke: np.ndarray, chunk: int = 6553
     dist = np.empty(len(points_px))
     frac = np.empty(len(points_px))
     for s in range(0, len(points_px), chunk):
-        p = points_px[s:s + chunk, None, :] - a[None]
+        p = points_px[s : s + chunk, None, :] - a[None]
         t = np.clip((p * ab[None]).sum(axis=2) / np.maximum(seg_len**2, 1e-12)[None], 0, 1)
         d2 = ((p - t[..., None] * ab[None]) ** 2).sum(axis=2)
         best = np.nan_to_num(d2, nan=np.inf).argmin(axis=1)
         rows = np.arange(len(p))
-        dist[s:s + chunk] = np.sqrt(d2[rows, best])
-        frac[s:s + chunk] = (arc[best] + t[rows, best] * seg_len[best]) / total
+        dist[s : s + chunk] = np.sqrt(d2[rows, best])
+        frac[s : s + chunk] = (arc[best] + t[rows, best] * seg_len[best]) / total
     return dist, frac
 
 
-def knn_path(means: np.ndarray, camera: Camera, stroke: np.ndarray, start: int, goal: int,
-             alpha: float = 1.0, k: int = 8) -> KnnPath:
+def knn_path(
+    means: np.ndarray, camera: Camera, stroke: np.ndarray, start: int, goal: int, alpha: float = 1.0, k: int = 8
+) -> KnnPath:
     """Shortest path from Gaussian `start` to `goal` over the k-NN graph with the paper's weight
     `|c_a - c_b| + alpha * D_s(b)^2` (D_s in pixels / (width / 2))."""
     clock = time.perf_counter()

@@ -1,6 +1,6 @@
 """Pinhole cameras in the OpenCV convention, their JSON form, and 3DGS `cameras.json`.
 
-Conventions (DESIGN.md): x right, y down, z forward; `world_to_camera` is 4x4;
+Conventions (docs/conventions.md): x right, y down, z forward; `world_to_camera` is 4x4;
 `u = fx * X / Z + cx`, `v = fy * Y / Z + cy` in continuous pixel coordinates whose origin is the
 top-left corner of the image (pixel (col, row) has its centre at (col + 0.5, row + 0.5)).
 """
@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import CameraError
 from .jsonfile import read_json
@@ -47,8 +48,10 @@ class Camera:
     def __post_init__(self) -> None:
         for attr in ("width", "height"):
             value = getattr(self, attr)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) and not (
-                isinstance(value, float) and value.is_integer()
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, np.integer))
+                and not (isinstance(value, float) and value.is_integer())
             ):
                 raise CameraError(f"camera {attr}: expected an integer, got {value!r}")
             value = int(value)
@@ -131,16 +134,18 @@ class Camera:
         if height is None:
             height = max(1, round(self.height * width / self.width))
         sx, sy = width / self.width, height / self.height
-        return Camera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, self.world_to_camera, self.name)
+        return Camera(
+            width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, self.world_to_camera, self.name
+        )
 
     # -- construction -------------------------------------------------------------------------
 
     @classmethod
     def look_at(
         cls,
-        eye: Sequence[float],
-        target: Sequence[float],
-        up: Sequence[float] = (0.0, -1.0, 0.0),
+        eye: npt.ArrayLike,
+        target: npt.ArrayLike,
+        up: npt.ArrayLike = (0.0, -1.0, 0.0),
         width: int = 960,
         height: int = 540,
         fov_y_deg: float = 37.8,
@@ -199,7 +204,7 @@ class Camera:
     # -- JSON ---------------------------------------------------------------------------------
 
     def to_dict(self) -> dict[str, Any]:
-        """Our camera JSON object (DESIGN.md, Files)."""
+        """Our camera JSON object (docs/conventions.md)."""
         out: dict[str, Any] = {
             "width": self.width,
             "height": self.height,
@@ -240,7 +245,7 @@ class Camera:
         """Parse one entry of the `cameras.json` written by 3DGS training.
 
         `rotation` there is camera-to-world and `position` the camera centre; the principal point
-        is implicitly the image centre (RASTER.md 2.4).
+        is implicitly the image centre (docs/conventions.md, `cameras.json`).
         """
         missing = [k for k in ("width", "height", "position", "rotation", "fx", "fy") if k not in data]
         if missing:
@@ -257,8 +262,16 @@ class Camera:
         matrix[:3, 3] = -rotation.T @ centre
         name = str(data.get("img_name", data.get("id", "")))
         try:
-            return cls(data["width"], data["height"], data["fx"], data["fy"],
-                       data["width"] / 2, data["height"] / 2, matrix, name)
+            return cls(
+                data["width"],
+                data["height"],
+                data["fx"],
+                data["fy"],
+                data["width"] / 2,
+                data["height"] / 2,
+                matrix,
+                name,
+            )
         except (CameraError, TypeError) as exc:
             raise CameraError(f"{source}: {exc}") from None
 

@@ -16,9 +16,9 @@ from . import synthetic
 from .camera import Camera
 from .extract import extract_rod
 from .render import render
+from .rig import Rig
 from .rod import Rod
 from .scene import GaussianScene
-from .rig import Rig
 
 MOVED = 0.05  # a Gaussian "moved" when its centre moved more than this many R
 NEEDLE = 0.5  # a tip sticking out by more than this many R is a needle
@@ -54,8 +54,14 @@ def _distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarra
     return cKDTree(np.concatenate(dense)).query(points)[0]
 
 
-def needle_fraction(rest: GaussianScene, deformed: GaussianScene, rest_axes: list[np.ndarray],
-                    deformed_axes: list[np.ndarray], radius: float, rows: np.ndarray | None = None) -> float:
+def needle_fraction(
+    rest: GaussianScene,
+    deformed: GaussianScene,
+    rest_axes: list[np.ndarray],
+    deformed_axes: list[np.ndarray],
+    radius: float,
+    rows: np.ndarray | None = None,
+) -> float:
     """Among the Gaussians that moved more than 0.05 R, the opacity-weighted fraction whose 3-sigma
     tips along their major axis end up further from the deformed axes than they were from the
     rest axes, by more than 0.5 R.
@@ -125,16 +131,16 @@ def arc_bend(angle: float = np.pi / 2, seed: int = 3, subdivide: bool = True) ->
     Returns: psnr (dB), gaussians (bound, after splitting), vertices.
     """
     tubes = synthetic.tube_scene([synthetic.straight], radius=0.01, clutter=0, seed=seed)
-    scene = tubes.scene.replace(means=tubes.scene.means - np.float32([0.0, 0.05, 0.0]))  # axis on y = 0
+    scene = tubes.scene.replace(means=tubes.scene.means - np.array([0.0, 0.05, 0.0], np.float32))  # axis on y = 0
     straight_view = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, -1, 0), width=960, height=540, fov_y_deg=40)
     uv, _ = straight_view.project(tubes.axes[0] - [0.0, 0.05, 0.0])
-    extraction = extract_rod(scene, straight_view, uv[np.r_[0:len(uv):40, len(uv) - 1]], radius=0.01)
+    extraction = extract_rod(scene, straight_view, uv[np.r_[0 : len(uv) : 40, len(uv) - 1]], radius=0.01)
     polyline = extraction.polyline.astype(np.float64)
     start, end = float(polyline[0, 0]), float(polyline[-1, 0])
     # the map's band is the rod's extent; what lies past the rod's ends is left out of both
     inside = (scene.means[:, 0] >= start - 0.01) & (scene.means[:, 0] <= end + 0.01)
     scene = scene.subset(np.flatnonzero(inside))
-    extraction = extract_rod(scene, straight_view, uv[np.r_[0:len(uv):40, len(uv) - 1]], radius=0.01)
+    extraction = extract_rod(scene, straight_view, uv[np.r_[0 : len(uv) : 40, len(uv) - 1]], radius=0.01)
     polyline = extraction.polyline.astype(np.float64)
     start, length = float(polyline[0, 0]), float(polyline[-1, 0] - polyline[0, 0])
 
@@ -147,7 +153,16 @@ def arc_bend(angle: float = np.pi / 2, seed: int = 3, subdivide: bool = True) ->
 
     arc = synthetic.bend_into_arc(polyline, start, length, angle)[0]
     centre = 0.5 * (arc.min(axis=0) + arc.max(axis=0))
-    camera = Camera.look_at(centre + [0.0, 0.0, -1.6 * float(np.ptp(arc, axis=0).max())], centre, up=(0, -1, 0),
-                            width=960, height=540, fov_y_deg=40)
-    return {"psnr": psnr(render(exact, camera).rgb, render(ours, camera).rgb),
-            "gaussians": float(len(rig.bound[0].gaussian_ids)), "vertices": float(rod.num_vertices)}
+    camera = Camera.look_at(
+        centre + [0.0, 0.0, -1.6 * float(np.ptp(arc, axis=0).max())],
+        centre,
+        up=(0, -1, 0),
+        width=960,
+        height=540,
+        fov_y_deg=40,
+    )
+    return {
+        "psnr": psnr(render(exact, camera).rgb_image, render(ours, camera).rgb_image),
+        "gaussians": float(len(rig.bound[0].gaussian_ids)),
+        "vertices": float(rod.num_vertices),
+    }

@@ -55,16 +55,27 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
     progress(f"loaded {data.SAMPLES[sample].file}: {len(scene):,} Gaussians")
     view = render(scene, camera, background=BACKGROUND)
     lap("render view")
-    save_png(out / "view.png", view.rgb)
+    save_png(out / "view.png", view.rgb_image)
     lap("write images")
     extraction = extract_rod(scene, camera, stroke, render=view)
     lap("extract rod")
     extraction.save(out / "rod.json")
-    save_png(out / "overlay.png", draw_overlay(view.rgb, camera, extraction.stroke, extraction.pixel_path,
-                                               extraction.polyline, scene.means[extraction.gaussian_ids]))
+    save_png(
+        out / "overlay.png",
+        draw_overlay(
+            view.rgb_image,
+            camera,
+            extraction.stroke,
+            extraction.pixel_path,
+            extraction.polyline,
+            scene.means[extraction.gaussian_ids],
+        ),
+    )
     lap("write images")
-    progress(f"rod: {len(extraction.polyline)} vertices, radius {extraction.radius:.4g}, "
-             f"{len(extraction.gaussian_ids):,} Gaussians bound")
+    progress(
+        f"rod: {len(extraction.polyline)} vertices, radius {extraction.radius:.4g}, "
+        f"{len(extraction.gaussian_ids):,} Gaussians bound"
+    )
 
     animation = Animation(scene, [extraction])
     pull = demo_pull(extraction, camera)
@@ -77,7 +88,7 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
         timings["simulate"] = timings.get("simulate", 0.0) + frame.timings["simulate"]
         timings["skin"] = timings.get("skin", 0.0) + frame.timings["skin"]
         clock = time.perf_counter()
-        rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb)
+        rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb_image)
         lap("render frames")
         save_png(out / "frames" / f"frame_{frame.index:04d}.png", rgb, compress_level=FRAME_PNG_LEVEL)
         lap("write images")
@@ -87,7 +98,7 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
             furthest, pulled = shift, rgb
         if frame.index % 15 == 0 or frame.index == count:
             progress(f"frame {frame.index}/{count} ({frame.phase})")
-    save_png(out / "pulled.png", pulled)
+    save_png(out / "pulled.png", pulled if pulled is not None else frames[-1])
     write_video(out / "pull.mp4", frames, FPS)
     lap("write video")
     back = float(np.abs(animation.rods[0].positions - animation.rods[0].rest_positions).max())

@@ -1,5 +1,5 @@
 """Sketch to rod: from one stroke on a view, the 3D polyline of the slender object under it and the
-Gaussians that belong to it (paper: Path Optimization, Occlusion, Post Process; DESIGN.md).
+Gaussians that belong to it (paper: Path Optimization, Occlusion, Post Process; docs/extraction.md).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ class Extraction:
     timings: dict[str, float] = field(default_factory=dict)
 
     def to_json(self, material: dict[str, Any] | None = None) -> dict[str, Any]:
-        """The rod JSON of DESIGN.md (polyline, radius, edge_length, camera, stroke, gaussian_ids, ...)."""
+        """The rod JSON (docs/rod_file.md) (polyline, radius, edge_length, camera, stroke, gaussian_ids, ...)."""
         return {
             "polyline": self.polyline.tolist(),
             "radius": self.radius,
@@ -102,7 +102,9 @@ class Extraction:
         atomic_write_text(path, json.dumps(data) + "\n")
 
     @classmethod
-    def from_json(cls, data: dict[str, Any], source: str = "rod", folder: str | os.PathLike[str] | None = None) -> Extraction:
+    def from_json(
+        cls, data: dict[str, Any], source: str = "rod", folder: str | os.PathLike[str] | None = None
+    ) -> Extraction:
         """Rebuild from rod JSON (`to_json`, or a saved rod file whose binary bindings lie in
         `folder`); the pixel path is not stored and comes back empty."""
         if not isinstance(data, dict):
@@ -162,7 +164,7 @@ def bindings_path(rod_path: str | os.PathLike[str]) -> Path:
     return rod_path.with_name(rod_path.stem + ".bindings.npz")
 
 
-def _binding_arrays(binding: sg.Binding) -> dict[str, np.ndarray]:
+def _binding_arrays(binding: sg.Binding) -> dict[str, Any]:
     """The arrays of the .npz (docs/rod_file.md): ids as deltas (sorted ids compress to almost
     nothing), the rest as stored in memory."""
     ids = binding.gaussian_ids.astype(np.int64)
@@ -178,7 +180,7 @@ def _binding_arrays(binding: sg.Binding) -> dict[str, np.ndarray]:
 def _read_bindings(spec: Any, folder: Path, source: str) -> dict[str, Any]:
     """The `gaussian_ids` and `binding` fields from the .npz a rod file names."""
     if not isinstance(spec, dict) or not isinstance(spec.get("file"), str) or not isinstance(spec.get("count"), int):
-        raise SketchRodGSError(f"{source}: bindings: expected {{\"file\": NAME, \"count\": N}}")
+        raise SketchRodGSError(f'{source}: bindings: expected {{"file": NAME, "count": N}}')
     if spec.get("format", BINDINGS_FORMAT) != BINDINGS_FORMAT:
         raise SketchRodGSError(f"{source}: bindings: format {spec.get('format')!r} is not {BINDINGS_FORMAT}")
     name = spec["file"]
@@ -198,22 +200,30 @@ def _read_bindings(spec: Any, folder: Path, source: str) -> dict[str, Any]:
         raise SketchRodGSError(f"{path}: missing array(s) {', '.join(missing)}")
     delta = arrays["gaussian_ids_delta"]
     if delta.dtype.kind not in "iu" or delta.ndim != 1 or len(delta) != spec["count"]:
-        raise SketchRodGSError(f"{path}: gaussian_ids_delta: expected {spec['count']} integers, got {delta.dtype} {delta.shape}")
+        raise SketchRodGSError(
+            f"{path}: gaussian_ids_delta: expected {spec['count']} integers, got {delta.dtype} {delta.shape}"
+        )
     return {
         "gaussian_ids": np.cumsum(delta.astype(np.int64)),
-        "binding": {"segment": arrays["segment"], "t": arrays["t"], "offset": arrays["offset"],
-                    "attached": arrays["attached"]},
+        "binding": {
+            "segment": arrays["segment"],
+            "t": arrays["t"],
+            "offset": arrays["offset"],
+            "attached": arrays["attached"],
+        },
     }
 
 
 def _array(value: Any, dtype: type, shape: tuple[int | None, ...], name: str) -> np.ndarray:
     """`value` as a C-contiguous array of `shape` (None: any length) with finite entries."""
     try:
-        array = np.ascontiguousarray(value, dtype=dtype)
+        array: np.ndarray = np.ascontiguousarray(value, dtype=dtype)
     except (TypeError, ValueError):
         raise SketchRodGSError(f"{name}: expected an array of numbers") from None
     if array.ndim != len(shape) or any(want is not None and got != want for got, want in zip(array.shape, shape)):
-        raise SketchRodGSError(f"{name}: expected shape {tuple('N' if s is None else s for s in shape)}, got {array.shape}")
+        raise SketchRodGSError(
+            f"{name}: expected shape {tuple('N' if s is None else s for s in shape)}, got {array.shape}"
+        )
     if array.dtype.kind == "f" and not np.isfinite(array).all():
         raise SketchRodGSError(f"{name}: contains NaN or infinite values")
     return array
@@ -278,10 +288,14 @@ def extract_rod(
         raise SketchRodGSError(f"attach_size: must be finite and > 0, got {attach_size}")
     if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
         raise SketchRodGSError(f"edge_length: must be finite and > 0, got {edge_length}")
-    if (isinstance(smoothing_iterations, bool) or not isinstance(smoothing_iterations, (int, np.integer))
-            or not 0 <= smoothing_iterations <= MAX_SMOOTHING_ITERATIONS):
+    if (
+        isinstance(smoothing_iterations, bool)
+        or not isinstance(smoothing_iterations, (int, np.integer))
+        or not 0 <= smoothing_iterations <= MAX_SMOOTHING_ITERATIONS
+    ):
         raise SketchRodGSError(
-            f"smoothing_iterations: must be a whole number in 0..{MAX_SMOOTHING_ITERATIONS}, got {smoothing_iterations!r}")
+            f"smoothing_iterations: must be a whole number in 0..{MAX_SMOOTHING_ITERATIONS}, got {smoothing_iterations!r}"
+        )
 
     partial = None
     if render is None:
@@ -297,11 +311,12 @@ def extract_rod(
         missed = partial.missed() if partial is not None else None
         try:
             radius_found, estimated, trace, pixel_path, path_ids, points = _trace(
-                scene, camera, render, stroke, radius, alpha, band_px, timings, partial, missed)
+                scene, camera, render, stroke, radius, alpha, band_px, timings, partial, missed
+            )
         except PathNotFoundError:
             if missed is None or not missed.any():
                 raise
-        if missed is None or not missed.any():
+        if partial is None or missed is None or not missed.any():
             break
         clock = time.perf_counter()
         partial.add(missed)
@@ -319,7 +334,10 @@ def extract_rod(
         raise _failure(
             f"the path under the stroke is too short for a rod ({len(path_ids)} Gaussians, {length:.3g} long, "
             f"radius {radius:.3g}): draw the stroke along more of the object, or give a smaller --radius",
-            stroke, pixel_path, pieces)
+            stroke,
+            pixel_path,
+            pieces,
+        )
     # Recentre on a uniform sampling at half the radius, then smooth and resample to the edge length.
     _check_vertex_count("radius", pl.polyline_length(points), radius / 2, radius, 4 * MAX_ROD_VERTICES)
     points = pl.resample(points, radius / 2)
@@ -336,8 +354,7 @@ def extract_rod(
     timings["polyline"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    binding = sg.segment_and_bind(polyline, scene, radius, grow=segment_scale, attach=attach,
-                                  attach_size=attach_size)
+    binding = sg.segment_and_bind(polyline, scene, radius, grow=segment_scale, attach=attach, attach_size=attach_size)
     timings["segment_bind"] = time.perf_counter() - clock
     # every piece but the last ends at a gap, in either direction, so the flags need no reversal
     reached = [bool(p["reached_goal"]) for p in pieces]
@@ -358,15 +375,24 @@ def extract_rod(
     )
 
 
-def _trace(scene: GaussianScene, camera: Camera, render: RenderResult, stroke: np.ndarray, radius: float | None,
-           alpha: float, band_px: float | None, timings: dict[str, float], partial: PartialRender | None,
-           missed: np.ndarray | None) -> tuple:
+def _trace(
+    scene: GaussianScene,
+    camera: Camera,
+    render: RenderResult,
+    stroke: np.ndarray,
+    radius: float | None,
+    alpha: float,
+    band_px: float | None,
+    timings: dict[str, float],
+    partial: PartialRender | None,
+    missed: np.ndarray | None,
+) -> tuple:
     """Everything that reads the render: R (estimated when None), the path, its Gaussians in order
     and their centres lightly smoothed. Returns (radius, estimated, trace, pixel_path (user's
     direction), path_ids, points)."""
     index, depth, opacity, work, flip = _search_inputs(render, stroke)
     focal = float(camera.fx)
-    region = {"rendered": partial.tiles, "missed": missed} if partial is not None else {}
+    region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed} if partial is not None else {}
     clock = time.perf_counter()
     estimated = radius is None
     if radius is None:
@@ -379,8 +405,18 @@ def _trace(scene: GaussianScene, camera: Camera, render: RenderResult, stroke: n
 
     def trace_path(radius: float) -> tuple[dict, list[np.ndarray], np.ndarray, np.ndarray]:
         try:
-            trace = _core.trace_stroke(index, depth, scene.means, work, float(radius), float(alpha),
-                                       float(band_px or 0.0), focal_px=focal, alpha=opacity, **region)
+            trace = _core.trace_stroke(
+                index,
+                depth,
+                scene.means,
+                work,
+                float(radius),
+                float(alpha),
+                float(band_px or 0.0),
+                focal_px=focal,
+                alpha=opacity,
+                **region,
+            )
         except PathNotFoundError as err:
             raise _failure(str(err), stroke, []) from None
         pixel_path = [p["pixels"].astype(np.int64) for p in trace["pieces"]]
@@ -403,8 +439,9 @@ def _trace(scene: GaussianScene, camera: Camera, render: RenderResult, stroke: n
     return radius, estimated, trace, pixel_path, path_ids, points
 
 
-def _near_their_pixels(pieces: list[dict], index: np.ndarray, means: np.ndarray, camera: Camera,
-                       radius: float) -> np.ndarray:
+def _near_their_pixels(
+    pieces: list[dict], index: np.ndarray, means: np.ndarray, camera: Camera, radius: float
+) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
     projects far from the pixel where the path met them: a big Gaussian of what the part touches
     (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's
@@ -420,7 +457,9 @@ def _near_their_pixels(pieces: list[dict], index: np.ndarray, means: np.ndarray,
     return ids[near] if near.sum() >= 2 else ids
 
 
-def _search_inputs(render: RenderResult, stroke: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+def _search_inputs(
+    render: RenderResult, stroke: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """The arrays the Rust search takes: index, index depth, opacity (covered pixels where the
     render has no alpha), and the stroke in the canonical direction with whether it was flipped.
     The search always starts at the stroke end that comes first in (x, y) order, so the result
@@ -439,8 +478,10 @@ def _check_vertex_count(name: str, length: float, spacing: float, value: float, 
         count = np.float64(length) / np.float64(spacing) + 1
     if not count <= most:
         shown = f"{count:,.0f}" if count < 1e12 else f"{count:.3g}"
-        raise SketchRodGSError(f"{name}: {value:g} would make {shown} vertices along the object ({length:.3g} long); "
-                               f"at most {most:,}: give a larger {name}")
+        raise SketchRodGSError(
+            f"{name}: {value:g} would make {shown} vertices along the object ({length:.3g} long); "
+            f"at most {most:,}: give a larger {name}"
+        )
 
 
 def _flipped(stroke: np.ndarray) -> bool:
@@ -448,7 +489,9 @@ def _flipped(stroke: np.ndarray) -> bool:
     return bool((stroke[-1, 0], stroke[-1, 1]) < (stroke[0, 0], stroke[0, 1]))
 
 
-def _failure(message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list | None = None) -> PathNotFoundError:
+def _failure(
+    message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list | None = None
+) -> PathNotFoundError:
     """A PathNotFoundError that carries what was found, so that callers can draw it: `stroke`,
     `pixel_path` (pieces of (P, 2) col, row) and `lost_at` ((col, row) where the path stopped)."""
     error = PathNotFoundError(message)

@@ -29,8 +29,15 @@ class FrameRenderer:
         background, outputs: as for `render`.
     """
 
-    def __init__(self, scene: GaussianScene, camera: Camera, moving: np.ndarray, *,
-                 background: Iterable[float] = (0.0, 0.0, 0.0), outputs: str | Iterable[str] = "all"):
+    def __init__(
+        self,
+        scene: GaussianScene,
+        camera: Camera,
+        moving: np.ndarray,
+        *,
+        background: Iterable[float] = (0.0, 0.0, 0.0),
+        outputs: str | Iterable[str] = "all",
+    ):
         if not isinstance(scene, GaussianScene):
             raise SketchRodGSError(f"scene: expected a GaussianScene, got {type(scene).__name__}")
         if not isinstance(camera, Camera):
@@ -39,10 +46,22 @@ class FrameRenderer:
         self.camera = camera
         rows = np.ascontiguousarray(moving, np.int64)
         self._retained = _core.RetainedRender(
-            scene.means, scene.scales, scene.quats, scene.opacities, scene.sh,
-            np.ascontiguousarray(camera.world_to_camera, dtype=np.float64), camera.width, camera.height,
-            camera.fx, camera.fy, camera.cx, camera.cy, rows, background=_background(background),
-            index_only=_index_only(outputs))
+            scene.means,
+            scene.scales,
+            scene.quats,
+            scene.opacities,
+            scene.sh,
+            np.ascontiguousarray(camera.world_to_camera, dtype=np.float64),
+            camera.width,
+            camera.height,
+            camera.fx,
+            camera.fy,
+            camera.cx,
+            camera.cy,
+            rows,
+            background=_background(background),
+            index_only=_index_only(outputs),
+        )
 
     def render(self, scene: GaussianScene) -> RenderResult:
         """The frame of `scene` (the scene at rest with the moving rows moved)."""
@@ -56,8 +75,18 @@ class FrameRenderer:
         for name, array, width in (("means", means, 3), ("scales", scales, 3), ("quats", quats, 4)):
             if array.shape != (self.size, width):
                 raise SketchRodGSError(f"{name}: expected shape ({self.size}, {width}), got {array.shape}")
-        raw = self._retained.frame(np.ascontiguousarray(means, np.float32), np.ascontiguousarray(scales, np.float32),
-                                   np.ascontiguousarray(quats, np.float32))
-        return RenderResult(rgb=raw["rgb"], alpha=raw["alpha"], depth=raw["depth"], index=raw["index"],
-                            index_depth=raw["index_depth"], timings=dict(raw["timings"]),
-                            n_visible=int(raw["n_visible"]), n_tile_pairs=int(raw["n_tile_pairs"]))
+        raw = self._retained.frame(
+            np.ascontiguousarray(means, np.float32),
+            np.ascontiguousarray(scales, np.float32),
+            np.ascontiguousarray(quats, np.float32),
+        )
+        return RenderResult(
+            rgb=raw["rgb"],
+            alpha=raw["alpha"],
+            depth=raw["depth"],
+            index=raw["index"],
+            index_depth=raw["index_depth"],
+            timings=dict(raw["timings"]),
+            n_visible=int(raw["n_visible"]),
+            n_tile_pairs=int(raw["n_tile_pairs"]),
+        )

@@ -72,7 +72,12 @@ class PartialRender:
             image[pixels] = getattr(part, name)[pixels]
         self.tiles |= new
         self.renders += 1
-        self.result = RenderResult(rgb=None, depth=None, alpha=merged["alpha"], index=merged["index"],
-                                   index_depth=merged["index_depth"],
-                                   n_visible=self.result.n_visible + part.n_visible,
-                                   n_tile_pairs=self.result.n_tile_pairs + part.n_tile_pairs)
+        self.result = RenderResult(
+            rgb=None,
+            depth=None,
+            alpha=merged["alpha"],
+            index=merged["index"],
+            index_depth=merged["index_depth"],
+            n_visible=self.result.n_visible + part.n_visible,
+            n_tile_pairs=self.result.n_tile_pairs + part.n_tile_pairs,
+        )

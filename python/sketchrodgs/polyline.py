@@ -1,4 +1,4 @@
-"""Polyline post-processing (DESIGN.md, "Polyline, segmentation, binding"): recentre visible surface
+"""Polyline post-processing (docs/extraction.md, "Polyline, segmentation, binding"): recentre visible surface
 points onto the object's axis, smooth, resample (segmentation and binding: `segment`).
 
 Smoothing, resampling and the recentring and binding logic are numpy; the two per-Gaussian loops
@@ -54,8 +54,8 @@ def recentre(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarr
     for reach in _REACHES:
         # surface points are noisy: take tangents over +-2 R of the smoothed line
         spacing = max(polyline_length(axis) / (len(axis) - 1), 1e-12)
-        t = tangents(laplacian_smooth(axis, 5), reach=max(1, int(round(2 * radius / spacing))))
-        axis, _ = _core.cross_section_centroids(axis, t, members, nearest, radius / 2, reach * radius)
+        tangent = tangents(laplacian_smooth(axis, 5), reach=max(1, int(round(2 * radius / spacing))))
+        axis, _ = _core.cross_section_centroids(axis, tangent, members, nearest, radius / 2, reach * radius)
     return _straighten_ends(axis, np.asarray(points, np.float64), radius)
 
 
@@ -82,7 +82,11 @@ def near_box(polyline: np.ndarray, centres: np.ndarray, margin: float) -> np.nda
     # float32 bounds rounded outwards, so that no centre inside the float64 box is missed
     low32 = np.nextafter(low.astype(np.float32), np.float32(-np.inf))
     high32 = np.nextafter(high.astype(np.float32), np.float32(np.inf))
-    return _core.rows_in_box(np.ascontiguousarray(centres, np.float32), tuple(map(float, low32)), tuple(map(float, high32)))
+    return _core.rows_in_box(np.ascontiguousarray(centres, np.float32), _triple(low32), _triple(high32))
+
+
+def _triple(v: np.ndarray) -> tuple[float, float, float]:
+    return float(v[0]), float(v[1]), float(v[2])
 
 
 def laplacian_smooth(points: np.ndarray, iterations: int, weight: float = 0.5) -> np.ndarray:

@@ -29,8 +29,15 @@ from .scene import GaussianScene
 
 # The targets, in units of the case's radius R.
 TARGETS = {
-    "cross_mean": 0.5, "cross_max": 1.5, "reverse_max": 0.1, "jitter_mean": 0.25, "jitter_max": 1.5,
-    "radius_low": 0.7, "radius_high": 1.4, "radius_spread": 1.5, "jitter_fail_share": 0.03,
+    "cross_mean": 0.5,
+    "cross_max": 1.5,
+    "reverse_max": 0.1,
+    "jitter_mean": 0.25,
+    "jitter_max": 1.5,
+    "radius_low": 0.7,
+    "radius_high": 1.4,
+    "radius_spread": 1.5,
+    "jitter_fail_share": 0.03,
 }
 
 
@@ -87,15 +94,21 @@ class CaseScore:
             ("unjittered strokes fail", self.failures == 0),
             (f"cross-view mean {self.cross_mean:.2f} R", self.cross_mean <= t["cross_mean"]),
             (f"cross-view max {self.cross_max:.2f} R", self.cross_max <= t["cross_max"]),
-            (f"cross-view mean (R estimated) {self.cross_mean_estimated:.2f} R",
-             self.cross_mean_estimated <= t["cross_mean"]),
-            (f"cross-view max (R estimated) {self.cross_max_estimated:.2f} R",
-             self.cross_max_estimated <= t["cross_max"]),
+            (
+                f"cross-view mean (R estimated) {self.cross_mean_estimated:.2f} R",
+                self.cross_mean_estimated <= t["cross_mean"],
+            ),
+            (
+                f"cross-view max (R estimated) {self.cross_max_estimated:.2f} R",
+                self.cross_max_estimated <= t["cross_max"],
+            ),
             (f"reversed {self.reverse_max:.2f} R", self.reverse_max <= t["reverse_max"]),
             (f"jitter mean {self.jitter_mean:.2f} R", self.jitter_mean <= t["jitter_mean"]),
             (f"jitter max {self.jitter_max:.2f} R", self.jitter_max <= t["jitter_max"]),
-            (f"radius {self.radius_low:.2f}-{self.radius_high:.2f} x R",
-             t["radius_low"] <= self.radius_low and self.radius_high <= t["radius_high"]),
+            (
+                f"radius {self.radius_low:.2f}-{self.radius_high:.2f} x R",
+                t["radius_low"] <= self.radius_low and self.radius_high <= t["radius_high"],
+            ),
             (f"radius spread {self.radius_spread:.2f}", self.radius_spread <= t["radius_spread"]),
         ]
         return [what for what, ok in checks if not ok]
@@ -112,15 +125,16 @@ def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10) -> li
         images = render(scene, camera, outputs="index")
         errors: list[str] = []
 
-        def attempt(s: np.ndarray, r: float | None) -> Extraction | None:
+        def attempt(s: np.ndarray, r: float | None, camera=camera, images=images, errors=errors) -> Extraction | None:
             try:
                 return extract_rod(scene, camera, s, radius=r, render=images)
             except PathNotFoundError as err:
                 errors.append(str(err))
                 return None
 
-        result = ViewResult(view["name"], attempt(stroke, radius), attempt(stroke, None),
-                            attempt(cs.reversed_stroke(stroke), radius))
+        result = ViewResult(
+            view["name"], attempt(stroke, radius), attempt(stroke, None), attempt(cs.reversed_stroke(stroke), radius)
+        )
         seed = zlib.crc32(f"{case['name']}/{view['name']}".encode())
         for s in cs.jittered_strokes(stroke, count=jitter, seed=seed):
             try:
@@ -142,7 +156,7 @@ def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
         return cs.polyline_agreement(a.polyline, b.polyline, radius)
 
     def cross(kind: str) -> tuple[float, float]:
-        pairs = [agreement(getattr(a, kind), getattr(b, kind)) for i, a in enumerate(views) for b in views[i + 1:]]
+        pairs = [agreement(getattr(a, kind), getattr(b, kind)) for i, a in enumerate(views) for b in views[i + 1 :]]
         return max(p["mean"] for p in pairs), max(p["max"] for p in pairs)
 
     cross_mean, cross_max = cross("given")
@@ -151,12 +165,16 @@ def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
     jitter = [agreement(v.given, j) for v in views if v.given is not None for j in v.jittered]
     radii = [v.estimated.radius for v in views if v.estimated is not None]
     ids = [set(v.given.gaussian_ids.tolist()) for v in views if v.given is not None]
-    jaccards = [cs.jaccard(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]]
+    jaccards = [cs.jaccard(a, b) for i, a in enumerate(ids) for b in ids[i + 1 :]]
     failures = sum((v.given is None) + (v.estimated is None) + (v.reversed is None) for v in views)
     return CaseScore(
-        name=case["name"], views=len(views), failures=failures,
-        cross_mean=cross_mean, cross_max=cross_max,
-        cross_mean_estimated=cross_mean_est, cross_max_estimated=cross_max_est,
+        name=case["name"],
+        views=len(views),
+        failures=failures,
+        cross_mean=cross_mean,
+        cross_max=cross_max,
+        cross_mean_estimated=cross_mean_est,
+        cross_max_estimated=cross_max_est,
         reverse_max=max(reverse),
         jitter_mean=float(np.mean([j["mean"] for j in jitter])) if jitter else np.nan,
         jitter_max=float(np.max([j["max"] for j in jitter])) if jitter else np.nan,

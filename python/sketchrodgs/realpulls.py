@@ -57,14 +57,17 @@ def across_view(camera: Camera, polyline: np.ndarray) -> np.ndarray:
     return world / np.linalg.norm(world)
 
 
-def pull_case(scene: GaussianScene, case: dict[str, Any], view_name: str, extract: dict[str, Any] | None = None,
-              **animation: Any) -> PullResult:
+def pull_case(
+    scene: GaussianScene, case: dict[str, Any], view_name: str, extract: dict[str, Any] | None = None, **animation: Any
+) -> PullResult:
     """Extract `case` in `view_name` with its measured radius, pull and hold, and score it.
 
     `extract` goes to `extract_rod` (segmentation options), `animation` to `Animation`."""
     view = next(v for v in case["views"] if v["name"] == view_name)
     camera = Camera.from_dict(view["camera"])
-    extraction = extract_rod(scene, camera, np.asarray(view["stroke"], np.float64), radius=case["radius"], **(extract or {}))
+    extraction = extract_rod(
+        scene, camera, np.asarray(view["stroke"], np.float64), radius=case["radius"], **(extract or {})
+    )
     anim = Animation(scene, [extraction], **animation)
     rod = anim.rods[0]
     offset = PULL_SHARE * polyline_length(extraction.polyline) * across_view(camera, extraction.polyline)
@@ -75,8 +78,22 @@ def pull_case(scene: GaussianScene, case: dict[str, Any], view_name: str, extrac
     axis_now = np.asarray(rod.positions, np.float64)
     radius = float(extraction.radius)
     return PullResult(
-        f"{case['name']}/{view_name}", camera, extraction, rest, deformed, extraction.polyline, axis_now, radius,
-        deform_metrics.needle_fraction(rest, deformed, [extraction.polyline], [axis_now], radius,
-                                       rows=np.setdiff1d(np.arange(len(rest)), bound.gaussian_ids[bound.attached])),
-        deform_metrics.tear_fraction(rest, deformed, radius), float(np.mean(skin_times)),
+        f"{case['name']}/{view_name}",
+        camera,
+        extraction,
+        rest,
+        deformed,
+        extraction.polyline,
+        axis_now,
+        radius,
+        deform_metrics.needle_fraction(
+            rest,
+            deformed,
+            [extraction.polyline],
+            [axis_now],
+            radius,
+            rows=np.setdiff1d(np.arange(len(rest)), bound.gaussian_ids[bound.attached]),
+        ),
+        deform_metrics.tear_fraction(rest, deformed, radius),
+        float(np.mean(skin_times)),
     )

@@ -1,6 +1,6 @@
 """Render a Gaussian scene for a camera on the CPU (Rust, parallel, the GIL released).
 
-The rasteriser follows the reference 3DGS one exactly (see RASTER.md): EWA projection with a
+The rasteriser follows the reference 3DGS one exactly (see docs/rendering.md): EWA projection with a
 0.3 px low-pass, 3-sigma footprint in 16x16 tiles, SH colour for the direction from the camera
 centre, front-to-back blending by camera z with alpha capped at 0.99, contributions below 1/255
 skipped and a stop once the transmittance would fall below 1e-4.
@@ -52,6 +52,13 @@ class RenderResult:
     timings: dict[str, float] = field(default_factory=dict)
     n_visible: int = 0
     n_tile_pairs: int = 0
+
+    @property
+    def rgb_image(self) -> np.ndarray:
+        """`rgb`, or an error where the render has no colour (made with `outputs="index"`)."""
+        if self.rgb is None:
+            raise SketchRodGSError("this render has no colour (it was made with outputs='index')")
+        return self.rgb
 
 
 def render(

@@ -46,8 +46,15 @@ class Rig:
     bound: list[BoundRod]
 
     @classmethod
-    def build(cls, scene: GaussianScene, extractions: Sequence[Extraction], rods: Sequence[Rod],
-              subdivide: bool = True, end_ramp: float = DEFAULT_END_RAMP, taken: np.ndarray | None = None) -> Rig:
+    def build(
+        cls,
+        scene: GaussianScene,
+        extractions: Sequence[Extraction],
+        rods: Sequence[Rod],
+        subdivide: bool = True,
+        end_ramp: float = DEFAULT_END_RAMP,
+        taken: np.ndarray | None = None,
+    ) -> Rig:
         """Bind each extraction's Gaussians to its rod (at rest in the extraction's polyline).
 
         Args:
@@ -63,15 +70,17 @@ class Rig:
             raise SketchRodGSError(f"{len(extractions)} extractions but {len(rods)} rods")
         inputs = len(scene)
         source = np.arange(inputs, dtype=np.int64)
-        bound = []
+        bound: list[BoundRod] = []
         for k, (extraction, rod) in enumerate(zip(extractions, rods)):
             if rod.num_vertices != len(extraction.polyline):
-                raise SketchRodGSError(f"rod {k} has {rod.num_vertices} vertices but its extraction's "
-                                       f"polyline {len(extraction.polyline)}")
+                raise SketchRodGSError(
+                    f"rod {k} has {rod.num_vertices} vertices but its extraction's polyline {len(extraction.polyline)}"
+                )
             b = extraction.binding
             if len(b.gaussian_ids) and (b.gaussian_ids.min() < 0 or b.gaussian_ids.max() >= inputs):
-                raise SketchRodGSError(f"rod {k}: binds Gaussian {int(b.gaussian_ids.max())} "
-                                       f"but the scene has {inputs}")
+                raise SketchRodGSError(
+                    f"rod {k}: binds Gaussian {int(b.gaussian_ids.max())} but the scene has {inputs}"
+                )
             b = _expand(b, source, scene.means, extraction.polyline)  # pieces an earlier rod split
             if subdivide:
                 # what an earlier rod bound keeps its geometry: that rod's binding refers to it
@@ -91,8 +100,9 @@ class Rig:
         return self.scene.replace(means=means, quats=quats, scales=scales)
 
 
-def clamped_end_weights(binding: Binding | BoundRod, rod: Rod, extraction: Extraction,
-                        ramp: float = DEFAULT_END_RAMP) -> np.ndarray:
+def clamped_end_weights(
+    binding: Binding | BoundRod, rod: Rod, extraction: Extraction, ramp: float = DEFAULT_END_RAMP
+) -> np.ndarray:
     """(G,) the share of the motion each bound Gaussian (its `segment` and `t`) takes: 1, eased to
     0 within `ramp` R of the ends of `rod` that are clamped now (see `Rig.build`)."""
     kinds = rod.boundaries
@@ -147,8 +157,9 @@ def _expand(binding: Binding, source: np.ndarray, means: np.ndarray, polyline: n
     return _rebind(expanded, np.flatnonzero(counts[source[rows]] > 1), means, polyline)
 
 
-def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, extraction: Extraction,
-                   taken: np.ndarray | None = None):
+def _split_needles(
+    scene: GaussianScene, source: np.ndarray, binding: Binding, extraction: Extraction, taken: np.ndarray | None = None
+):
     """Split the needles among `binding`'s part rows (not `taken` ones), and the static needles
     that reach into the part (a guitar string whose centre lies on the body, beyond the neck's
     end). Every piece is bound anew; of a static needle, the pieces that lie in the part join the
@@ -176,22 +187,30 @@ def _split_needles(scene: GaussianScene, source: np.ndarray, binding: Binding, e
     appended = np.arange(first, len(scene), dtype=np.int64)
     of_bound, parents = _entries_of(binding.gaussian_ids, new_source[first:])
     extra = binding.take(parents)
-    binding = binding.extend(Binding(appended[of_bound], extra.segment, extra.t, extra.offset, extra.distance,
-                                     extra.attached))
+    binding = binding.extend(
+        Binding(appended[of_bound], extra.segment, extra.t, extra.offset, extra.distance, extra.attached)
+    )
     # ...and a static needle's pieces join it where they lie in the part (bound by `_rebind`)
     static_pieces = np.concatenate([straddling, appended[~of_bound]])
     seg, t, _ = _core.nearest_on_polyline(polyline.astype(np.float32), scene.means[static_pieces], reach)
     static_pieces = static_pieces[(seg >= 0) & ~past_an_end(seg, t, len(polyline))]
     count = len(static_pieces)
-    joined = Binding(static_pieces, np.zeros(count, np.int32), np.zeros(count, np.float32),
-                     np.zeros((count, 3), np.float32), np.zeros(count, np.float32), np.zeros(count, bool))
+    joined = Binding(
+        static_pieces,
+        np.zeros(count, np.int32),
+        np.zeros(count, np.float32),
+        np.zeros((count, 3), np.float32),
+        np.zeros(count, np.float32),
+        np.zeros(count, bool),
+    )
     binding = binding.extend(joined)
     pieces = np.flatnonzero(np.isin(binding.gaussian_ids, piece_rows))
     return scene, source, _rebind(binding, pieces, scene.means, polyline)
 
 
-def _reaching_in(scene: GaussianScene, binding: Binding, polyline: np.ndarray, reach: float,
-                 edge_length: float) -> tuple[np.ndarray, np.ndarray]:
+def _reaching_in(
+    scene: GaussianScene, binding: Binding, polyline: np.ndarray, reach: float, edge_length: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Unbound Gaussians whose major axis runs within `reach` of the rod (not past its ends) for at
     least an edge and for at least REACH_IN_SHARE of their 3-sigma length; and for each a segment
     it runs along. (Needles of a leaf that only touch a stem stay with the leaf.)"""
@@ -214,5 +233,3 @@ def _reaching_in(scene: GaussianScene, binding: Binding, polyline: np.ndarray, r
     keep = (length_inside >= edge_length) & (length_inside >= REACH_IN_SHARE * 6 * longest[rows])
     first_inside = np.argmax(inside[:, keep], axis=0)
     return rows[keep], np.maximum(nearest[:, keep][first_inside, np.arange(int(keep.sum()))], 0)
-
-

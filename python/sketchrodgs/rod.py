@@ -239,8 +239,10 @@ class _OneThreadAtATime:
             except RuntimeError as exc:
                 if "borrowed" not in str(exc):
                     raise
-                raise SimulationError(f"{name}: this World (and its rods) is in use by another thread; a World is "
-                                      "not shared across threads: give each thread its own, or hold a lock") from None
+                raise SimulationError(
+                    f"{name}: this World (and its rods) is in use by another thread; a World is "
+                    "not shared across threads: give each thread its own, or hold a lock"
+                ) from None
 
         return call
 
@@ -265,7 +267,9 @@ class World:
 
     @solver.setter
     def solver(self, s: SolverSettings) -> None:
-        self._core.set_solver(float(s.tolerance), int(s.max_iterations), int(s.max_halvings), int(s.max_static_iterations))
+        self._core.set_solver(
+            float(s.tolerance), int(s.max_iterations), int(s.max_halvings), int(s.max_static_iterations)
+        )
 
     @property
     def rods(self) -> list[Rod]:
@@ -416,10 +420,14 @@ class Rod:
         """Per vertex: "free", "pinned" or "clamped"."""
         return list(self.world._core.boundaries(self.index))
 
-    def move_clamp(self, vertex: int, rotation: npt.ArrayLike | None = None, translation: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
+    def move_clamp(
+        self, vertex: int, rotation: npt.ArrayLike | None = None, translation: npt.ArrayLike = (0.0, 0.0, 0.0)
+    ) -> None:
         """Moves the clamp of `vertex` rigidly from its pose when clamped: its frame rotated by
         `rotation` (3, 3), the vertex translated by `translation`. Turn less than pi per step."""
-        self.world._core.move_clamp(self.index, self._vertex(vertex), _rotation(rotation, "rotation"), _vec3(translation, "translation"))
+        self.world._core.move_clamp(
+            self.index, self._vertex(vertex), _rotation(rotation, "rotation"), _vec3(translation, "translation")
+        )
 
     def clamp_torque(self, vertex: int) -> float:
         """Twisting moment [N m] the rod exerts on the clamp of `vertex` about its tangent."""
@@ -545,4 +553,3 @@ class Rod:
     def __repr__(self) -> str:
         where = "detached" if self._index is None else f"rod {self._index} of {len(self._world)}"
         return f"Rod({self._n} vertices, radius={self._params.radius}, E={self._params.youngs_modulus}, {where})"
-

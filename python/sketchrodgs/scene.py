@@ -22,7 +22,7 @@ def sh_coefficient_count(degree: int) -> int:
 
 @dataclass(frozen=True, eq=False)
 class GaussianScene:
-    """A 3D Gaussian Splatting scene with activated values (see DESIGN.md, Conventions).
+    """A 3D Gaussian Splatting scene with activated values (see docs/conventions.md).
 
     Attributes:
         means: (N, 3) float32 centres in world units.
@@ -101,9 +101,7 @@ class GaussianScene:
 
     def subset(self, rows: np.ndarray) -> GaussianScene:
         """A new scene with only `rows` (indices or a boolean mask), in that order."""
-        return GaussianScene(
-            self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows]
-        )
+        return GaussianScene(self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows])
 
     def replace(self, **arrays: np.ndarray) -> GaussianScene:
         """A new scene with some arrays replaced (the others are shared, not copied)."""
@@ -130,7 +128,8 @@ def _as_rows(scene: GaussianScene, name: str, width: int, n: int | None = None) 
     return int(array.shape[0])
 
 
-def _first_bad(name: str, bad_rows: np.ndarray, what: str) -> None:
+def _first_bad(name: str, bad_rows: np.ndarray | np.bool_, what: str) -> None:
+    bad_rows = np.asarray(bad_rows)
     if bad_rows.any():
         row = int(np.argmax(bad_rows))
         raise SceneFormatError(f"{name}: {what} in row {row} ({int(bad_rows.sum())} bad rows)")

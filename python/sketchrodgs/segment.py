@@ -77,8 +77,15 @@ class Binding:
         return Binding(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in Binding.__dataclass_fields__))
 
 
-def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, *, grow: float = DEFAULT_GROW,
-                     attach: bool = True, attach_size: float | None = None) -> Binding:
+def segment_and_bind(
+    polyline: np.ndarray,
+    scene: GaussianScene,
+    radius: float,
+    *,
+    grow: float = DEFAULT_GROW,
+    attach: bool = True,
+    attach_size: float | None = None,
+) -> Binding:
     """The Gaussians that follow the rod on `polyline`, bound (see the module docstring).
 
     Args:
@@ -133,8 +140,7 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
         along = np.full(len(rows), np.nan)
         along[:count] = arc[segment] + t * (arc[segment + 1] - arc[segment])
         attached_rows, contact = _attached_parts(points, link, part, distance, reach - link, attach_size)
-        attached_rows, contact = _not_from_a_neighbour(attached_rows, contact, along, end, length,
-                                                       END_MARGIN * radius)
+        attached_rows, contact = _not_from_a_neighbour(attached_rows, contact, along, end, length, END_MARGIN * radius)
         home[attached_rows] = contact
         attached[attached_rows] = True
     centres = means[rows].astype(np.float64)
@@ -147,8 +153,12 @@ def segment_and_bind(polyline: np.ndarray, scene: GaussianScene, radius: float, 
     par = t[home[keep]]
     rest_points = point_at(polyline, seg, par)
     return Binding(
-        rows[keep].astype(np.int64), seg.astype(np.int32), par.astype(np.float32),
-        (centres[keep] - rest_points).astype(np.float32), distance[keep].astype(np.float32), attached[keep],
+        rows[keep].astype(np.int64),
+        seg.astype(np.int32),
+        par.astype(np.float32),
+        (centres[keep] - rest_points).astype(np.float32),
+        distance[keep].astype(np.float32),
+        attached[keep],
     )
 
 
@@ -171,8 +181,9 @@ def point_at(polyline: np.ndarray, segment: np.ndarray, t: np.ndarray) -> np.nda
     return a + np.asarray(t, np.float64)[:, None] * (polyline[segment + 1] - a)
 
 
-def _attached_parts(points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float,
-                    size: float) -> tuple[np.ndarray, np.ndarray]:
+def _attached_parts(
+    points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float, size: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Rows of the small parts that touch `part`, and for each the part row it joins at.
 
     A part is a component of the links among the other points. It is small when none of it comes
@@ -200,8 +211,9 @@ def _attached_parts(points: np.ndarray, link: float, part: np.ndarray, distance:
     return others[chosen], contact[chosen]
 
 
-def _not_from_a_neighbour(rows: np.ndarray, contact: np.ndarray, along: np.ndarray, end: np.ndarray, length: float,
-                          margin: float) -> tuple[np.ndarray, np.ndarray]:
+def _not_from_a_neighbour(
+    rows: np.ndarray, contact: np.ndarray, along: np.ndarray, end: np.ndarray, length: float, margin: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Drop the attached parts that join within `margin` of a rod end but lie beside the rod
     rather than past that end: there the rod meets what it is joined to, and a part touching it
     (a leaf of the main stem at a side stem's base) belongs to that."""

@@ -25,6 +25,7 @@ from .rod import Rod
 from .scene import GaussianScene
 from .segment import Binding
 
+
 @dataclass(frozen=True, eq=False)
 class BoundRod:
     """One rod's Gaussians, bound at rest.
@@ -54,15 +55,18 @@ class BoundRod:
     rest_frames: np.ndarray
 
     @classmethod
-    def from_binding(cls, scene: GaussianScene, binding: Binding, rod: Rod, weight: np.ndarray | None = None) -> BoundRod:
+    def from_binding(
+        cls, scene: GaussianScene, binding: Binding, rod: Rod, weight: np.ndarray | None = None
+    ) -> BoundRod:
         """Bind `binding`'s Gaussians (rows of `scene`) to `rod`, which must be at rest, each
         taking `weight` of the motion (default all of it)."""
         ids = binding.gaussian_ids
         if len(ids) and (ids.min() < 0 or ids.max() >= len(scene)):
             raise SketchRodGSError(f"binding refers to Gaussian {int(ids.max())} but the scene has {len(scene)}")
         if len(binding.segment) and binding.segment.max() >= rod.num_vertices - 1:
-            raise SketchRodGSError(f"binding refers to segment {int(binding.segment.max())} "
-                                   f"but the rod has {rod.num_vertices - 1}")
+            raise SketchRodGSError(
+                f"binding refers to segment {int(binding.segment.max())} but the rod has {rod.num_vertices - 1}"
+            )
         return cls(
             np.ascontiguousarray(ids, np.int64),
             np.ascontiguousarray(binding.segment, np.int32),
@@ -98,8 +102,10 @@ def matrices_to_quats(matrices: np.ndarray) -> np.ndarray:
         r = m[case == k]
         if k == 0:
             s = 2 * np.sqrt(np.maximum(1 + r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2], 1e-300))
-            q[case == k] = np.stack([s / 4, (r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s,
-                                     (r[:, 1, 0] - r[:, 0, 1]) / s], axis=1)
+            q[case == k] = np.stack(
+                [s / 4, (r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s, (r[:, 1, 0] - r[:, 0, 1]) / s],
+                axis=1,
+            )
         else:
             i, j, l = k - 1, k % 3, (k + 1) % 3
             s = 2 * np.sqrt(np.maximum(1 + r[:, i, i] - r[:, j, j] - r[:, l, l], 1e-300))
@@ -118,8 +124,9 @@ def vertex_rotations(rod: Rod, rest_frames: np.ndarray) -> np.ndarray:
     return matrices_to_quats(now @ np.transpose(rest_frames, (0, 2, 1))).astype(np.float32)
 
 
-def skin_into(means: np.ndarray, quats: np.ndarray, scales: np.ndarray, bound: Sequence[BoundRod],
-              rods: Sequence[Rod]) -> None:
+def skin_into(
+    means: np.ndarray, quats: np.ndarray, scales: np.ndarray, bound: Sequence[BoundRod], rods: Sequence[Rod]
+) -> None:
     """Overwrite the bound rows of `means` (N, 3), `quats` (N, 4) and `scales` (N, 3) (float32,
     C-contiguous) with their skinned values; other rows are untouched. The fast path for
     interactive use.
@@ -130,8 +137,21 @@ def skin_into(means: np.ndarray, quats: np.ndarray, scales: np.ndarray, bound: S
         raise SketchRodGSError(f"{len(bound)} bound rods but {len(rods)} rods")
     for b, rod in zip(bound, rods):
         deformed = np.ascontiguousarray(rod.positions, np.float32)
-        _core.skin_scatter(b.rest_positions, deformed, vertex_rotations(rod, b.rest_frames), b.segment, b.t, b.offset,
-                           b.rest_quats, b.rest_scales, b.weight, b.gaussian_ids, means, quats, scales)
+        _core.skin_scatter(
+            b.rest_positions,
+            deformed,
+            vertex_rotations(rod, b.rest_frames),
+            b.segment,
+            b.t,
+            b.offset,
+            b.rest_quats,
+            b.rest_scales,
+            b.weight,
+            b.gaussian_ids,
+            means,
+            quats,
+            scales,
+        )
 
 
 def skin(

@@ -84,7 +84,9 @@ def fit_piece_table(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         lower, upper = np.r_[-5.0, -6.0, -12 * np.ones(half)], np.r_[2.0, upper_std, 12 * np.ones(half)]
         x = least_squares(residual, np.clip(x, lower + 1e-6, upper - 1e-6), bounds=(lower, upper)).x
         d, s, piece = unpack(x)
-        spacing.append(d), std.append(s), opacity.append(piece)
+        spacing.append(d)
+        std.append(s)
+        opacity.append(piece)
     return np.array(spacing), np.array(std), np.array(opacity)
 
 
@@ -128,8 +130,9 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
         d = np.interp(o, _OPACITY_GRID, spacing)
         s = np.interp(o, _OPACITY_GRID, std)
         # interpolate the pieces' opacity relative to the parent's (constant where opacities are low)
-        op = o[:, None] * np.stack([np.interp(o, _OPACITY_GRID, piece_opacity[:, i] / _OPACITY_GRID)
-                                    for i in range(k)], axis=1)
+        op = o[:, None] * np.stack(
+            [np.interp(o, _OPACITY_GRID, piece_opacity[:, i] / _OPACITY_GRID) for i in range(k)], axis=1
+        )
         op = np.minimum(op, 1.0)
         parent_scales = scene.scales[parents].astype(np.float64)
         major = np.argmax(parent_scales, axis=1)
@@ -143,7 +146,9 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
             if i == 0:
                 means[parents], scales[parents], opacities[parents] = centre, new_scales, op[:, 0]
             else:
-                extra_means.append(centre), extra_scales.append(new_scales), extra_opacity.append(op[:, i])
+                extra_means.append(centre)
+                extra_scales.append(new_scales)
+                extra_opacity.append(op[:, i])
                 extra_source.append(parents)
     source = np.concatenate([np.arange(n, dtype=np.int64)] + [np.asarray(s, np.int64) for s in extra_source])
     if len(source) == n:
@@ -151,7 +156,9 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
     new = GaussianScene(
         np.concatenate([means] + extra_means).astype(np.float32),
         np.concatenate([scales] + extra_scales).astype(np.float32),
-        scene.quats[source], np.concatenate([opacities] + extra_opacity).astype(np.float32), scene.sh[source],
+        scene.quats[source],
+        np.concatenate([opacities] + extra_opacity).astype(np.float32),
+        scene.sh[source],
     )
     piece_rows = np.concatenate([split_rows, np.arange(n, len(source), dtype=np.int64)])
     return new, source, piece_rows
@@ -161,7 +168,10 @@ if __name__ == "__main__":
     tables = {}
     for k in range(2, MAX_PIECES + 1):
         spacing, std, opacity = fit_piece_table(k)
-        tables[str(k)] = {"spacing": spacing.round(6).tolist(), "std": std.round(6).tolist(),
-                          "opacity": opacity.round(6).tolist()}
+        tables[str(k)] = {
+            "spacing": spacing.round(6).tolist(),
+            "std": std.round(6).tolist(),
+            "opacity": opacity.round(6).tolist(),
+        }
     TABLE_FILE.write_text(json.dumps({"opacity_grid": _OPACITY_GRID.tolist(), **tables}) + "\n", encoding="utf-8")
     print(f"wrote {TABLE_FILE}")

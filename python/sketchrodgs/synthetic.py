@@ -43,8 +43,13 @@ def sample_curve(curve: Curve, samples: int = 2000) -> tuple[np.ndarray, np.ndar
     return points, arc
 
 
-def tube_gaussians(curve: Curve, radius: float, rng: np.random.Generator, density: float = 8000.0,
-                   color: tuple[float, float, float] = (0.8, 0.5, 0.2)) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def tube_gaussians(
+    curve: Curve,
+    radius: float,
+    rng: np.random.Generator,
+    density: float = 8000.0,
+    color: tuple[float, float, float] = (0.8, 0.5, 0.2),
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Gaussians on the surface of the tube of `radius` around `curve` (density per unit length
     at R = 0.01, scaled with the surface area). Returns the arrays and the dense axis."""
     axis, arc = sample_curve(curve)
@@ -63,18 +68,30 @@ def tube_gaussians(curve: Curve, radius: float, rng: np.random.Generator, densit
     theta = rng.uniform(0, 2 * np.pi, count)[:, None]
     radial = radius * rng.normal(1.0, 0.08, count)[:, None]
     means = centre + radial * (np.cos(theta) * n1 + np.sin(theta) * n2)
-    scales = radius * np.stack([rng.uniform(0.15, 0.6, count), rng.uniform(0.08, 0.3, count),
-                                rng.uniform(0.03, 0.1, count)], axis=1)
+    scales = radius * np.stack(
+        [rng.uniform(0.15, 0.6, count), rng.uniform(0.08, 0.3, count), rng.uniform(0.03, 0.1, count)], axis=1
+    )
     quats = rng.normal(size=(count, 4))
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)
     colors = np.clip(np.asarray(color) + rng.normal(0, 0.05, (count, 3)), 0, 1)
-    arrays = {"means": means, "scales": scales, "quats": quats,
-              "opacities": rng.uniform(0.35, 1.0, count), "colors": colors}
+    arrays = {
+        "means": means,
+        "scales": scales,
+        "quats": quats,
+        "opacities": rng.uniform(0.35, 1.0, count),
+        "colors": colors,
+    }
     return arrays, axis
 
 
-def clutter_gaussians(count: int, low: np.ndarray, high: np.ndarray, keep_away: list[np.ndarray], distance: float,
-                      rng: np.random.Generator) -> dict[str, np.ndarray]:
+def clutter_gaussians(
+    count: int,
+    low: np.ndarray,
+    high: np.ndarray,
+    keep_away: list[np.ndarray],
+    distance: float,
+    rng: np.random.Generator,
+) -> dict[str, np.ndarray]:
     """`count` blobs in the box [low, high], none within `distance` of the given axes."""
     from scipy.spatial import cKDTree
 
@@ -86,12 +103,18 @@ def clutter_gaussians(count: int, low: np.ndarray, high: np.ndarray, keep_away: 
     n = len(means)
     quats = rng.normal(size=(n, 4))
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)
-    return {"means": means, "scales": np.exp(rng.uniform(np.log(0.004), np.log(0.03), (n, 3))), "quats": quats,
-            "opacities": rng.uniform(0.2, 0.9, n), "colors": rng.uniform(0.1, 0.9, (n, 3))}
+    return {
+        "means": means,
+        "scales": np.exp(rng.uniform(np.log(0.004), np.log(0.03), (n, 3))),
+        "quats": quats,
+        "opacities": rng.uniform(0.2, 0.9, n),
+        "colors": rng.uniform(0.1, 0.9, (n, 3)),
+    }
 
 
-def tube_scene(curves: list[Curve], radius: float = 0.01, *, clutter: int = 3000, seed: int = 0,
-               radii: list[float] | None = None) -> TubeScene:
+def tube_scene(
+    curves: list[Curve], radius: float = 0.01, *, clutter: int = 3000, seed: int = 0, radii: list[float] | None = None
+) -> TubeScene:
     """Tubes around `curves` (radius per tube from `radii`, else `radius`) plus clutter."""
     rng = np.random.default_rng(seed)
     parts, axes, labels = [], [], []
@@ -111,12 +134,14 @@ def tube_scene(curves: list[Curve], radius: float = 0.01, *, clutter: int = 3000
         parts.append(arrays)
         labels.append(np.full(len(arrays["means"]), -1, np.int32))
     merged = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    scene = GaussianScene.from_colors(merged["means"], merged["scales"], merged["quats"],
-                                      merged["opacities"], merged["colors"])
+    scene = GaussianScene.from_colors(
+        merged["means"], merged["scales"], merged["quats"], merged["opacities"], merged["colors"]
+    )
     return TubeScene(scene, axes, radius, np.concatenate(labels))
 
 
 # -- curves used by the tests and benchmarks (parameters in [0, 1]) -----------------------------
+
 
 def straight(u: np.ndarray) -> np.ndarray:
     return np.stack([u - 0.5, 0.05 * np.ones_like(u), np.zeros_like(u)], axis=1)
@@ -138,6 +163,7 @@ def loop(u: np.ndarray) -> np.ndarray:
 
 
 # -- an exact deformation, the ground truth for skinning -----------------------------------------
+
 
 def bend_into_arc(points: np.ndarray, start: float, length: float, angle: float) -> tuple[np.ndarray, np.ndarray]:
     """The continuum map that bends the straight band `start <= x <= start + length` (axis along x
@@ -176,9 +202,14 @@ def deform_exactly(scene: GaussianScene, mapped: np.ndarray, jacobian: np.ndarra
     (J Sigma J^T, diagonalised again into a rotation and scales)."""
     axes = Rotation.from_quat(scene.quats[:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
     scales = scene.scales.astype(np.float64)
-    covariance = jacobian @ axes @ (scales[:, :, None] ** 2 * np.transpose(axes, (0, 2, 1))) @ np.transpose(jacobian, (0, 2, 1))
+    covariance = (
+        jacobian @ axes @ (scales[:, :, None] ** 2 * np.transpose(axes, (0, 2, 1))) @ np.transpose(jacobian, (0, 2, 1))
+    )
     values, vectors = np.linalg.eigh(covariance)
     vectors[np.linalg.det(vectors) < 0, :, 0] *= -1  # a proper rotation
     quats = Rotation.from_matrix(vectors).as_quat()[:, [3, 0, 1, 2]]
-    return scene.replace(means=mapped.astype(np.float32), scales=np.sqrt(np.maximum(values, 1e-20)).astype(np.float32),
-                         quats=quats.astype(np.float32))
+    return scene.replace(
+        means=mapped.astype(np.float32),
+        scales=np.sqrt(np.maximum(values, 1e-20)).astype(np.float32),
+        quats=quats.astype(np.float32),
+    )

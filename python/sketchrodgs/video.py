@@ -21,8 +21,9 @@ def write_video(path: str | os.PathLike[str], frames: Sequence[np.ndarray], fps:
     if suffix == ".gif":
         images = [Image.fromarray(f) for f in frames]
         with atomic_open(path) as stream:
-            images[0].save(stream, format="GIF", save_all=True, append_images=images[1:],
-                           duration=int(round(1000 / fps)), loop=0)
+            images[0].save(
+                stream, format="GIF", save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0
+            )
     elif suffix == ".mp4":
         import imageio.v2 as imageio
 
@@ -33,10 +34,11 @@ def write_video(path: str | os.PathLike[str], frames: Sequence[np.ndarray], fps:
             # H.264 wants even sizes; pad by repeating the last row/column when needed
             height, width = frames[0].shape[:2]
             pad = ((0, height % 2), (0, width % 2), (0, 0))
-            with imageio.get_writer(temporary, fps=fps, codec="libx264", quality=7, macro_block_size=1,
-                                    ffmpeg_log_level="error") as writer:
+            with imageio.get_writer(
+                temporary, fps=fps, codec="libx264", quality=7, macro_block_size=1, ffmpeg_log_level="error"
+            ) as writer:
                 for frame in frames:
-                    writer.append_data(np.pad(frame, pad, mode="edge"))
+                    writer.append_data(np.pad(frame, pad, mode="edge"))  # type: ignore[attr-defined]  # imageio v2 writer
             os.replace(temporary, target)
         finally:
             temporary.unlink(missing_ok=True)

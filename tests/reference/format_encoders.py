@@ -76,16 +76,33 @@ def spz_blocks(
     return [a.tobytes() for a in (positions, alphas, colors, log_scales, rotations, sh_bytes)]
 
 
-def spz_gzip(blocks: list[bytes], count: int, sh_degree: int, version: int, fractional_bits: int = 12,
-             flags: int = 0, extensions: bytes = b"", magic: bytes = b"NGSP") -> bytes:
+def spz_gzip(
+    blocks: list[bytes],
+    count: int,
+    sh_degree: int,
+    version: int,
+    fractional_bits: int = 12,
+    flags: int = 0,
+    extensions: bytes = b"",
+    magic: bytes = b"NGSP",
+) -> bytes:
     """A version 2/3 file: gzip(16-byte header + extension records + blocks)."""
     header = struct.pack("<4sIIBBBB", magic, version, count, sh_degree, fractional_bits, flags, 0)
     return gzip.compress(header + extensions + b"".join(blocks))
 
 
-def spz_v4(blocks: list[bytes], count: int, sh_degree: int, fractional_bits: int = 12, flags: int = 0,
-           extensions: bytes = b"", frames: list[bytes] | None = None, sizes: list[int] | None = None,
-           stream_count: int | None = None, version: int = 4) -> bytes:
+def spz_v4(
+    blocks: list[bytes],
+    count: int,
+    sh_degree: int,
+    fractional_bits: int = 12,
+    flags: int = 0,
+    extensions: bytes = b"",
+    frames: list[bytes] | None = None,
+    sizes: list[int] | None = None,
+    stream_count: int | None = None,
+    version: int = 4,
+) -> bytes:
     """A version 4 file: 32-byte header, extension records, table of contents, zstd streams.
 
     Empty blocks are left out, as the reference writer does. `frames` replaces the compressed
@@ -98,14 +115,16 @@ def spz_v4(blocks: list[bytes], count: int, sh_degree: int, fractional_bits: int
         sizes = [len(block) for block in stored]
     count_of_streams = len(frames) if stream_count is None else stream_count
     toc_offset = 32 + len(extensions)
-    header = struct.pack("<4sIIBBBBI12x", b"NGSP", version, count, sh_degree, fractional_bits, flags,
-                         count_of_streams, toc_offset)
+    header = struct.pack(
+        "<4sIIBBBBI12x", b"NGSP", version, count, sh_degree, fractional_bits, flags, count_of_streams, toc_offset
+    )
     toc = b"".join(struct.pack("<QQ", len(frame), size) for frame, size in zip(frames, sizes, strict=True))
     return header + extensions + toc + b"".join(frames)
 
 
-def encode_spz(means, scales, quats, opacities, sh, version: int = 4, fractional_bits: int = 12,
-               sh_bits: tuple[int, int] = (8, 8)) -> bytes:
+def encode_spz(
+    means, scales, quats, opacities, sh, version: int = 4, fractional_bits: int = 12, sh_bits: tuple[int, int] = (8, 8)
+) -> bytes:
     """A whole `.spz` file of `version` (2, 3 or 4) for the given activated arrays."""
     sh = np.asarray(sh)
     degree = {1: 0, 4: 1, 9: 2, 16: 3, 25: 4}[sh.shape[1]]
@@ -118,8 +137,20 @@ def encode_spz(means, scales, quats, opacities, sh, version: int = 4, fractional
 # ---- PlayCanvas compressed PLY ------------------------------------------------------------------
 
 CHUNK = 256
-CHUNK_PROPERTIES = ["min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
-                    "min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z"]
+CHUNK_PROPERTIES = [
+    "min_x",
+    "min_y",
+    "min_z",
+    "max_x",
+    "max_y",
+    "max_z",
+    "min_scale_x",
+    "min_scale_y",
+    "min_scale_z",
+    "max_scale_x",
+    "max_scale_y",
+    "max_scale_z",
+]
 CHUNK_COLOR_PROPERTIES = ["min_r", "min_g", "min_b", "max_r", "max_g", "max_b"]
 
 
@@ -135,8 +166,16 @@ def _pack_unorm(values: np.ndarray, bits: int) -> np.ndarray:
     return np.clip(np.floor(values * top + 0.5), 0, top).astype(np.uint32)
 
 
-def encode_compressed_ply(means, scales, quats, opacities, sh, chunk_colors: bool = True,
-                          chunk_rows: int | None = None, sh_rows: int | None = None) -> bytes:
+def encode_compressed_ply(
+    means,
+    scales,
+    quats,
+    opacities,
+    sh,
+    chunk_colors: bool = True,
+    chunk_rows: int | None = None,
+    sh_rows: int | None = None,
+) -> bytes:
     """A compressed `.ply` in the layout splat-transform writes (file order kept, no sorting).
 
     `chunk_colors=False` writes the older 12-property chunks whose colours are stored directly.
@@ -165,8 +204,12 @@ def encode_compressed_ply(means, scales, quats, opacities, sh, chunk_colors: boo
     packed_scale = pack_111011(log_scale, scale_lo, scale_hi)
     color_t = _normalize(rgb, rgb_lo, rgb_hi) if chunk_colors else rgb
     alpha = padded(np.asarray(opacities, np.float64))
-    packed_color = ((_pack_unorm(color_t[..., 0], 8) << 24) | (_pack_unorm(color_t[..., 1], 8) << 16)
-                    | (_pack_unorm(color_t[..., 2], 8) << 8) | _pack_unorm(alpha, 8))
+    packed_color = (
+        (_pack_unorm(color_t[..., 0], 8) << 24)
+        | (_pack_unorm(color_t[..., 1], 8) << 16)
+        | (_pack_unorm(color_t[..., 2], 8) << 8)
+        | _pack_unorm(alpha, 8)
+    )
     q = padded(np.asarray(quats, np.float64))
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     largest = np.argmax(np.abs(q), axis=-1)  # first of equal magnitudes, like the writer's reduce
@@ -184,11 +227,16 @@ def encode_compressed_ply(means, scales, quats, opacities, sh, chunk_colors: boo
     chunk_data = np.concatenate(chunk_table, axis=1).astype("<f4")
     if chunk_rows is not None:  # as many rows as the header claims, so the file itself parses
         chunk_data = np.resize(chunk_data, (chunk_rows, chunk_data.shape[1]))
-    vertex = np.stack([a.reshape(-1)[:n] for a in (packed_position, packed_rotation, packed_scale, packed_color)],
-                      axis=1).astype("<u4")
+    vertex = np.stack(
+        [a.reshape(-1)[:n] for a in (packed_position, packed_rotation, packed_scale, packed_color)], axis=1
+    ).astype("<u4")
     rest_count = 3 * (sh.shape[1] - 1)
-    lines = ["ply", "format binary_little_endian 1.0", "comment test encoder",
-             f"element chunk {chunks if chunk_rows is None else chunk_rows}"]
+    lines = [
+        "ply",
+        "format binary_little_endian 1.0",
+        "comment test encoder",
+        f"element chunk {chunks if chunk_rows is None else chunk_rows}",
+    ]
     lines += [f"property float {name}" for name in chunk_names]
     lines += [f"element vertex {n}"]
     lines += [f"property uint packed_{name}" for name in ("position", "rotation", "scale", "color")]

@@ -1,7 +1,7 @@
-"""A slow, obvious NumPy implementation of the reference 3DGS rasteriser (RASTER.md), in float64.
+"""A slow, obvious NumPy implementation of the reference 3DGS rasteriser (docs/rendering.md), in float64.
 
 It is the test oracle of the Rust rasteriser on small scenes and the "simple reference" of
-benches/bench_render.py. Every step is written as RASTER.md states it, with no shortcut: the
+benches/bench_render.py. Every step is written as docs/rendering.md states it, with no shortcut: the
 projection is vectorised over Gaussians, then each 16x16 tile blends its depth-sorted list one
 Gaussian at a time, vectorised over the tile's pixels.
 """
@@ -77,7 +77,7 @@ def eval_sh(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
 
 
 def project_reference(scene, camera) -> dict[str, np.ndarray]:
-    """Per-Gaussian screen-space quantities (RASTER.md steps 1-7), all float64.
+    """Per-Gaussian screen-space quantities (docs/rendering.md steps 1-7), all float64.
 
     Returns a dict with `visible` (N,) bool, `z`, `mean2d` (N, 2) = (u - 0.5, v - 0.5),
     `conic` (N, 3), `radius`, `rect` (N, 4) = tile x0, y0, x1, y1 (half-open), `color` (N, 3).
@@ -134,11 +134,19 @@ def project_reference(scene, camera) -> dict[str, np.ndarray]:
         dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
         color = eval_sh(scene.sh.astype(np.float64), dirs)
     visible = (z > NEAR) & (det != 0) & np.isfinite(det) & (rect[:, 0] < rect[:, 2]) & (rect[:, 1] < rect[:, 3])
-    return {"visible": visible, "z": z, "mean2d": mean2d, "conic": conic, "radius": radius, "rect": rect, "color": color}
+    return {
+        "visible": visible,
+        "z": z,
+        "mean2d": mean2d,
+        "conic": conic,
+        "radius": radius,
+        "rect": rect,
+        "color": color,
+    }
 
 
 def render_reference(scene, camera, background=(0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
-    """Render like RASTER.md, float64. Returns rgb (H, W, 3), alpha, depth, index (int32),
+    """Render like docs/rendering.md, float64. Returns rgb (H, W, 3), alpha, depth, index (int32),
     index_depth, max_weight and n_contrib, each (H, W)."""
     proj = project_reference(scene, camera)
     width, height = camera.width, camera.height

@@ -15,19 +15,26 @@ HELP = "render the bundled plant, extract a stem from a stored stroke, pull and 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("-o", "--output", default="sketchrodgs-demo", metavar="DIR", help="where to write (default ./sketchrodgs-demo)")
-    parser.add_argument("--view", action="store_true", help="then open the browser viewer on the plant with the rod ready to pull")
+    parser.add_argument(
+        "-o", "--output", default="sketchrodgs-demo", metavar="DIR", help="where to write (default ./sketchrodgs-demo)"
+    )
+    parser.add_argument(
+        "--view", action="store_true", help="then open the browser viewer on the plant with the rod ready to pull"
+    )
     parser.add_argument("--port", type=int, default=8080, help="port for --view (default 8080)")
 
 
 def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     summary = run_demo(out, sample=SAMPLE, progress=lambda line: print(f"  {line}", flush=True))
-    print(f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json, frames/ ({summary['frames']} PNGs), "
-          f"pull.mp4, summary.txt in {summary['total_s']:.1f} s")
+    print(
+        f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json, frames/ ({summary['frames']} PNGs), "
+        f"pull.mp4, summary.txt in {summary['total_s']:.1f} s"
+    )
     if args.view:
         from . import main  # the same `view` command a user would type
 
-        return main(["view", str(data.sample(SAMPLE)), "--rod", str(out / "rod.json"), "-o", str(out),
-                     "--port", str(args.port)])
+        return main(
+            ["view", str(data.sample(SAMPLE)), "--rod", str(out / "rod.json"), "-o", str(out), "--port", str(args.port)]
+        )
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+from typing import Any
 
 import numpy as np
 
@@ -16,11 +17,13 @@ HELP = "print the Gaussian count, SH degree, bounding box and opacity/scale stat
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", type=scene_path, help="scene file (.ply, compressed .ply, .splat, .spz), or sample:NAME")
+    parser.add_argument(
+        "scene", type=scene_path, help="scene file (.ply, compressed .ply, .splat, .spz), or sample:NAME"
+    )
     parser.add_argument("--json", action="store_true", help="print the statistics as JSON")
 
 
-def scene_summary(path: str) -> dict[str, object]:
+def scene_summary(path: str) -> dict[str, Any]:
     """The statistics `info` prints, as a JSON-ready dict."""
     scene = load_scene(path)
     fmt = detect_format(path)

@@ -6,6 +6,7 @@ import argparse
 import io
 import json
 import time
+from typing import Any
 
 import numpy as np
 
@@ -34,16 +35,31 @@ def _side(value: str) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", type=scene_path, help="scene file (.ply or .splat), or sample:NAME")
     parser.add_argument(
-        "--camera", required=True, metavar="CAM.json", help="our camera JSON (one camera or {\"cameras\": [...]}) or a 3DGS cameras.json"
+        "--camera",
+        required=True,
+        metavar="CAM.json",
+        help='our camera JSON (one camera or {"cameras": [...]}) or a 3DGS cameras.json',
     )
-    parser.add_argument("--view", metavar="N|NAME", help="which camera of the file: position or name (default: the first)")
-    parser.add_argument("-o", "--output", metavar="OUT.png", help="colour image to write (8-bit RGB, clamped to [0, 1])")
     parser.add_argument(
-        "--index", metavar="OUT.npz", help="write index (int32, -1 = none), index_depth, alpha, depth and the camera as .npz"
+        "--view", metavar="N|NAME", help="which camera of the file: position or name (default: the first)"
+    )
+    parser.add_argument(
+        "-o", "--output", metavar="OUT.png", help="colour image to write (8-bit RGB, clamped to [0, 1])"
+    )
+    parser.add_argument(
+        "--index",
+        metavar="OUT.npz",
+        help="write index (int32, -1 = none), index_depth, alpha, depth and the camera as .npz",
     )
     parser.add_argument("--width", type=_side, help="render at this width (focal lengths scale with it)")
     parser.add_argument("--height", type=_side, help="render at this height (default: keeps the aspect ratio)")
-    parser.add_argument("--background", type=number_triple("R,G,B"), default=(0.0, 0.0, 0.0), metavar="R,G,B", help="background colour in [0, 1] (default 0,0,0)")
+    parser.add_argument(
+        "--background",
+        type=number_triple("R,G,B"),
+        default=(0.0, 0.0, 0.0),
+        metavar="R,G,B",
+        help="background colour in [0, 1] (default 0,0,0)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,9 +74,9 @@ def run(args: argparse.Namespace) -> int:
     result = render(scene, camera, background=args.background, outputs="all" if args.output else "index")
     elapsed = time.perf_counter() - start
     if args.output:
-        save_png(args.output, result.rgb)
+        save_png(args.output, result.rgb_image)
     if args.index:
-        arrays = {"index": result.index, "index_depth": result.index_depth, "alpha": result.alpha}
+        arrays: dict[str, Any] = {"index": result.index, "index_depth": result.index_depth, "alpha": result.alpha}
         if result.depth is not None:
             arrays.update(depth=result.depth)
         buffer = io.BytesIO()

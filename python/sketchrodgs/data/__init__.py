@@ -25,8 +25,12 @@ class Sample:
 
 
 SAMPLES = {
-    "plant": Sample("plant.splat", "real phone capture of a potted houseplant, 113,648 splats, CC-BY-4.0 Marcel Padilla",
-                    "plant_camera.json", "plant_stroke.json"),
+    "plant": Sample(
+        "plant.splat",
+        "real phone capture of a potted houseplant, 113,648 splats, CC-BY-4.0 Marcel Padilla",
+        "plant_camera.json",
+        "plant_stroke.json",
+    ),
     "ring": Sample("ring_10k.splat", "open split ring (a tube on an elliptical centre line), 10k splats, CC0-1.0"),
 }
 

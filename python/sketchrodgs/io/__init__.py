@@ -51,7 +51,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         raise SceneFormatError(f"{path}: cannot read ({exc.strerror})") from None
     if head[:4] in (b"ply\n", b"ply\r"):
         end = head.find(b"end_header")
-        lines = head[:end if end >= 0 else len(head)].splitlines()
+        lines = head[: end if end >= 0 else len(head)].splitlines()
         return "compressed-ply" if any(line.split()[:2] == [b"element", b"chunk"] for line in lines) else "ply"
     if head[:4] == spz.MAGIC or _gzipped_spz(head):
         return "spz"

@@ -29,6 +29,10 @@ def map_file(path: str | os.PathLike[str]) -> np.ndarray:
 def empty_scene_arrays(n: int, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Uninitialised float32 means (n, 3), scales (n, 3), quats (n, 4), opacities (n,), sh (n, k, 3)
     for a decoder to fill (numpy asks the kernel for huge pages for big arrays: fewer page faults)."""
-    return (np.empty((n, 3), dtype=np.float32), np.empty((n, 3), dtype=np.float32),
-            np.empty((n, 4), dtype=np.float32), np.empty(n, dtype=np.float32),
-            np.empty((n, k, 3), dtype=np.float32))
+    return (
+        np.empty((n, 3), dtype=np.float32),
+        np.empty((n, 3), dtype=np.float32),
+        np.empty((n, 4), dtype=np.float32),
+        np.empty(n, dtype=np.float32),
+        np.empty((n, k, 3), dtype=np.float32),
+    )

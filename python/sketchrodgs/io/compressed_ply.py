@@ -37,8 +37,20 @@ from ._quantized import empty_scene_arrays
 from .ply import _check_header
 
 CHUNK_SIZE = 256
-CHUNK_BOUNDS = ("min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
-                "min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x", "max_scale_y", "max_scale_z")
+CHUNK_BOUNDS = (
+    "min_x",
+    "min_y",
+    "min_z",
+    "max_x",
+    "max_y",
+    "max_z",
+    "min_scale_x",
+    "min_scale_y",
+    "min_scale_z",
+    "max_scale_x",
+    "max_scale_y",
+    "max_scale_z",
+)
 CHUNK_COLOR_BOUNDS = ("min_r", "min_g", "min_b", "max_r", "max_g", "max_b")
 PACKED = ("packed_position", "packed_rotation", "packed_scale", "packed_color")
 _REST_COUNT_TO_DEGREE = {3 * (sh_coefficient_count(d) - 1): d for d in (1, 2, 3)}

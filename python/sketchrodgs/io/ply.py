@@ -1,4 +1,4 @@
-"""INRIA 3DGS `point_cloud.ply` (RASTER.md 2.1): read with plyfile, write in the reference layout."""
+"""INRIA 3DGS `point_cloud.ply` (docs/conventions.md): read with plyfile, write in the reference layout."""
 
 from __future__ import annotations
 
@@ -12,8 +12,22 @@ from ..atomic import atomic_open
 from ..errors import SceneFormatError
 from ..scene import GaussianScene, sh_coefficient_count
 
-REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-            "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+REQUIRED = (
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
+)
 _REST_COUNT_TO_DEGREE = {3 * (sh_coefficient_count(d) - 1): d for d in range(4)}
 _HEADER_LIMIT = 1 << 16  # a header longer than this is not a 3DGS file
 # Opacity is stored as a logit; 0 and 1 would be infinite, so they are pulled this far inside.
@@ -24,9 +38,11 @@ _UNIT_NORM_SLACK = 2.0**-21  # a few float32 ulps around 1
 def reference_property_names(sh_degree: int) -> list[str]:
     """Vertex property names in the order the reference 3DGS `save_ply` writes them."""
     rest = 3 * (sh_coefficient_count(sh_degree) - 1)
-    return (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-            + [f"f_rest_{i}" for i in range(rest)]
-            + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    return (
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+        + [f"f_rest_{i}" for i in range(rest)]
+        + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    )
 
 
 def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
@@ -105,12 +121,12 @@ def write_ply(scene: GaussianScene, path: str | os.PathLike[str]) -> None:
     table[:, 0:3] = scene.means
     table[:, 6:9] = scene.sh[:, 0]
     # channel-major f_rest: (N, K-1, 3) -> (N, 3, K-1) -> flat
-    table[:, 9:9 + 3 * (k - 1)] = scene.sh[:, 1:].transpose(0, 2, 1).reshape(n, -1)
+    table[:, 9 : 9 + 3 * (k - 1)] = scene.sh[:, 1:].transpose(0, 2, 1).reshape(n, -1)
     tail = 9 + 3 * (k - 1)
     opacity = np.clip(scene.opacities.astype(np.float64), _OPACITY_EPS, 1 - _OPACITY_EPS)
     table[:, tail] = np.log(opacity / (1 - opacity))
-    table[:, tail + 1:tail + 4] = np.log(scene.scales.astype(np.float64))
-    table[:, tail + 4:tail + 8] = scene.quats
+    table[:, tail + 1 : tail + 4] = np.log(scene.scales.astype(np.float64))
+    table[:, tail + 4 : tail + 8] = scene.quats
     records = table.view(np.dtype([(name, "<f4") for name in names])).reshape(n)
     element = plyfile.PlyElement.describe(records, "vertex")
     with atomic_open(path) as stream:
@@ -167,7 +183,8 @@ def _float_vertex_table(path: str | os.PathLike[str]):
     if body != count * width * 4:
         raise SceneFormatError(
             f"{path}: the header says {count} vertex rows of {width * 4} bytes ({count * width * 4} bytes), "
-            f"but {body} bytes follow it ({'truncated' if body < count * width * 4 else 'data past the last row'})")
+            f"but {body} bytes follow it ({'truncated' if body < count * width * 4 else 'data past the last row'})"
+        )
 
     def gather(*wanted: list[int]) -> list[np.ndarray]:
         outputs = [np.empty((count, len(w)), np.float32) for w in wanted]
@@ -177,13 +194,13 @@ def _float_vertex_table(path: str | os.PathLike[str]):
             for row in range(0, count, _ROWS_PER_READ):
                 rows = min(_ROWS_PER_READ, count - row)
                 block = buffer[: rows * width]
-                if stream.readinto(memoryview(block).cast("B")) != block.nbytes:
+                if stream.readinto(block.data.cast("B")) != block.nbytes:
                     raise SceneFormatError(f"{path}: file ended inside vertex row {row}")
                 table = block.reshape(rows, width)
                 if not table.dtype.isnative:
                     table = table.astype(np.float32)
                 for out, w in zip(outputs, wanted):
-                    np.take(table, w, axis=1, out=out[row:row + rows])  # no temporary (fancy indexing makes one)
+                    np.take(table, w, axis=1, out=out[row : row + rows])  # no temporary (fancy indexing makes one)
         return outputs
 
     return names, gather
@@ -198,20 +215,30 @@ def _check_body(path: str | os.PathLike[str], data: plyfile.PlyData) -> None:
     body = raw[start:]
     if data.text:
         if body and not body[-1:].isspace():
-            raise SceneFormatError(f"{path}: the file ends inside a value (truncated): '{body[-20:].decode(errors='replace')}'")
+            raise SceneFormatError(
+                f"{path}: the file ends inside a value (truncated): '{body[-20:].decode(errors='replace')}'"
+            )
         rows = sum(1 for line in body.splitlines() if line.strip())
         expected = sum(element.count for element in data.elements)
         if rows > expected:
-            raise SceneFormatError(f"{path}: {rows} rows of data but the header declares {expected} "
-                                   "(its counts are below the data)")
+            raise SceneFormatError(
+                f"{path}: {rows} rows of data but the header declares {expected} (its counts are below the data)"
+            )
         return
-    sizes = [[0 if isinstance(prop, plyfile.PlyListProperty) else np.dtype(prop.val_dtype).itemsize
-              for prop in element.properties] for element in data.elements]
+    sizes = [
+        [
+            0 if isinstance(prop, plyfile.PlyListProperty) else np.dtype(prop.val_dtype).itemsize
+            for prop in element.properties
+        ]
+        for element in data.elements
+    ]
     if all(all(sizes_) for sizes_ in sizes):  # fixed-size rows only
         expected = sum(element.count * sum(row) for element, row in zip(data.elements, sizes))
         if len(body) > expected:
-            raise SceneFormatError(f"{path}: {len(body) - expected} bytes after the last row the header declares "
-                                   "(its counts are below the data)")
+            raise SceneFormatError(
+                f"{path}: {len(body) - expected} bytes after the last row the header declares "
+                "(its counts are below the data)"
+            )
 
 
 def _check_header(path: str | os.PathLike[str]) -> None:
@@ -235,7 +262,9 @@ def _check_header(path: str | os.PathLike[str]) -> None:
             except ValueError:
                 raise SceneFormatError(f"{path}: element {parts[1]!r} has a non-integer count") from None
             if count < 0:
-                raise SceneFormatError(f"{path}: element {parts[1].decode(errors='replace')} has negative count {count}")
+                raise SceneFormatError(
+                    f"{path}: element {parts[1].decode(errors='replace')} has negative count {count}"
+                )
             # ASCII rows take at least 2 bytes ("0\n"), binary rows at least 1.
             if count * (2 if ascii_format else 1) > body:
                 raise SceneFormatError(

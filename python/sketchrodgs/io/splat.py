@@ -1,4 +1,4 @@
-"""antimatter15 `.splat`: headerless 32-byte records (RASTER.md 2.2)."""
+"""antimatter15 `.splat`: headerless 32-byte records (docs/conventions.md)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,9 @@ def read_splat(path: str | os.PathLike[str]) -> GaussianScene:
     if len(raw) == 0:
         raise SceneFormatError(f"{path}: empty .splat file")
     if len(raw) % RECORD.itemsize:
-        raise SceneFormatError(f"{path}: size {len(raw)} bytes is not a multiple of the 32-byte .splat record (truncated?)")
+        raise SceneFormatError(
+            f"{path}: size {len(raw)} bytes is not a multiple of the 32-byte .splat record (truncated?)"
+        )
     return decode_splat(raw, os.fspath(path))
 
 

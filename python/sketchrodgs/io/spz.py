@@ -143,7 +143,8 @@ def parse_header(magic: bytes, version: int, count: int, sh_degree: int, fractio
         # positions are 24-bit fixed point: more fractional bits than that put every one near 0
         raise SceneFormatError(
             f"fractionalBits {fractional_bits}: positions are 24-bit fixed point, so at most {MAX_FRACTIONAL_BITS} "
-            "(the reference writer uses 12)")
+            "(the reference writer uses 12)"
+        )
     return SpzHeader(version, count, sh_degree, fractional_bits, flags)
 
 
@@ -184,7 +185,7 @@ def _inflate_gzipped(raw: np.ndarray, source: str) -> tuple[SpzHeader, np.ndarra
             f"SPZ data ends in the {inside} after {body:,} of the {payload:,} bytes that {header.count:,} splats "
             "need (truncated, or the count disagrees with the data)"
         )
-    return header, inflated[written - payload:written]
+    return header, inflated[written - payload : written]
 
 
 def _gzipped_header(raw: np.ndarray) -> SpzHeader:
@@ -197,7 +198,7 @@ def _gzipped_header(raw: np.ndarray) -> SpzHeader:
             if not piece:
                 if fed >= len(raw):
                     break
-                piece, fed = raw[fed:fed + _HEADER_PIECE], fed + _HEADER_PIECE
+                piece, fed = raw[fed : fed + _HEADER_PIECE].tobytes(), fed + _HEADER_PIECE
             head += inflater.decompress(piece, LEGACY_HEADER.size - len(head))
     except zlib.error as exc:
         raise SceneFormatError(f"corrupt gzip stream ({exc})") from None
@@ -222,7 +223,7 @@ def _inflate_v4(raw: np.ndarray) -> tuple[SpzHeader, np.ndarray]:
     """Version 4: a plain header and table of contents, then one zstd stream per attribute."""
     if len(raw) < V4_HEADER.size:
         raise SceneFormatError(f"file ends inside the {V4_HEADER.size}-byte SPZ header ({len(raw)} bytes)")
-    *fields, stream_count, toc_offset = V4_HEADER.unpack_from(raw)
+    *fields, stream_count, toc_offset = V4_HEADER.unpack_from(raw.data)
     header = parse_header(*fields)
     if header.version != 4:
         raise SceneFormatError(f"SPZ version {header.version} must be gzipped, but the file starts with NGSP")
@@ -237,7 +238,7 @@ def _inflate_v4(raw: np.ndarray) -> tuple[SpzHeader, np.ndarray]:
     frames = []
     offset = toc_end
     for i, (name, size) in enumerate(expected):
-        compressed, uncompressed = TOC_ENTRY.unpack_from(raw, toc_offset + TOC_ENTRY.size * i)
+        compressed, uncompressed = TOC_ENTRY.unpack_from(raw.data, toc_offset + TOC_ENTRY.size * i)
         if uncompressed != size:
             raise SceneFormatError(
                 f"{name} stream holds {uncompressed:,} bytes but {header.count:,} splats need {size:,} "
@@ -250,20 +251,20 @@ def _inflate_v4(raw: np.ndarray) -> tuple[SpzHeader, np.ndarray]:
             )
         if size > compressed * ZSTD_MAX_RATIO + _ZSTD_FRAME_SLACK:
             raise SceneFormatError(f"{name} stream of {compressed:,} bytes cannot expand to {size:,} bytes")
-        frames.append((name, raw[offset:offset + compressed], size))
+        frames.append((name, raw[offset : offset + compressed], size))
         offset += compressed
     payload = np.empty(header.payload_bytes(), dtype=np.uint8)
     done = 0
     for name, frame, size in frames:
-        _unzstd_into(name, frame, payload[done:done + size])
+        _unzstd_into(name, frame, payload[done : done + size])
         done += size
     return header, payload
 
 
 def _unzstd_into(name: str, frame: np.ndarray, out: np.ndarray) -> None:
     """Decompress the zstd stream `frame` into exactly `out`, or say why it does not fit."""
-    reader = zstandard.ZstdDecompressor().stream_reader(memoryview(frame), read_across_frames=True)
-    view, got = memoryview(out), 0
+    reader = zstandard.ZstdDecompressor().stream_reader(frame.data, read_across_frames=True)
+    view, got = out.data, 0
     try:
         while got < len(out):
             count = reader.readinto(view[got:])

@@ -43,9 +43,12 @@ from .sketch import Stroke, extract
 logger = logging.getLogger("sketchrodgs")
 
 UP_DIRECTIONS = {
-    "+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0),
-    "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),
-    "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0),
+    "+x": (1.0, 0.0, 0.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0),
+    "-z": (0.0, 0.0, -1.0),
 }
 # Up to this many Gaussians the rods' Gaussians are re-sent exactly every frame; above it they
 # move as per-segment nodes, so that the browser need not re-merge a large scene 60 times a
@@ -128,8 +131,15 @@ class ViewerApp:
             self.panel = Panel(self.server.gui, self.rods.params, clamp_ends, working_width)
             self._wire_panel()
             self._box = self.server.scene.add_box(
-                "/sketch/surface", color=(255, 255, 255), dimensions=(1.0, 1.0, 1.0), opacity=0.0, side="back",
-                cast_shadow=False, receive_shadow=False, visible=False)
+                "/sketch/surface",
+                color=(255, 255, 255),
+                dimensions=(1.0, 1.0, 1.0),
+                opacity=0.0,
+                side="back",
+                cast_shadow=False,
+                receive_shadow=False,
+                visible=False,
+            )
             self._box.on_drag("left")(self._on_sketch_drag)
             self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sketchrodgs-extract")
             for extraction in rods:
@@ -140,8 +150,9 @@ class ViewerApp:
         except BaseException:
             self.server.stop()
             raise
-        self._set_status(f"{len(scene):,} Gaussians ({self.splat_update} rod updates). "
-                         "Choose Sketch and drag along a slender part.")
+        self._set_status(
+            f"{len(scene):,} Gaussians ({self.splat_update} rod updates). Choose Sketch and drag along a slender part."
+        )
 
     # ----- lifetime -----
 
@@ -245,7 +256,8 @@ class ViewerApp:
             f"Rod {entry.id}: {len(extraction.polyline)} vertices, {len(entry.gaussian_ids):,} Gaussians, "
             f"R = {extraction.radius:.4g}, stroke covered {100 * extraction.coverage:.0f} %, "
             f"{1e3 * seconds:.0f} ms ({', '.join(f'{k} {1e3 * v:.0f}' for k, v in extraction.timings.items())} ms). "
-            "Play to pull it.")
+            "Play to pull it."
+        )
         return entry
 
     def sketch(self, stroke: Stroke) -> Future[RodEntry | None]:
@@ -302,9 +314,9 @@ class ViewerApp:
         names = tuple(f"rod {e.id}" for e in self.rods.entries) or (NO_ROD,)
         self.panel.rod.options = names
         if select is not None:
-            self.panel.rod.value = f"rod {select}"
+            self.panel.rod.value = f"rod {select}"  # type: ignore[misc]  # viser's dropdown value is settable
         elif self.panel.rod.value not in names:
-            self.panel.rod.value = names[-1]
+            self.panel.rod.value = names[-1]  # type: ignore[misc]
 
     async def _on_handle_drag(self, rod_id: int, event: Any) -> None:
         vertex = event.instance_index
@@ -412,11 +424,13 @@ class ViewerApp:
                     self._set_status(f"{what} failed: {exc}")
                     return
                 self._set_status(f"{what}: {result}")
+
             return run
 
         panel.export_ply.on_click(exporting("Deformed scene written", lambda e: self.export_ply()))
-        panel.save_rods.on_click(exporting(
-            "Rods written", lambda e: ", ".join(str(p) for p in self.save_rods()) or "no rods to save"))
+        panel.save_rods.on_click(
+            exporting("Rods written", lambda e: ", ".join(str(p) for p in self.save_rods()) or "no rods to save")
+        )
         panel.screenshot.on_click(exporting("Screenshot written", lambda e: self.screenshot(e.client)))
 
     def _set_status(self, text: str) -> None:
@@ -431,7 +445,8 @@ class ViewerApp:
         bound = int(sum(len(e.gaussian_ids) for e in self.rods.entries))
         self.panel.timings.content = (
             f"**Frame** ({bound:,} rod Gaussians, {self.splat_update}, mean of the last "
-            f"{min(self.loop.timings.count, 60)}): {self.loop.timings.summary()}")
+            f"{min(self.loop.timings.count, 60)}): {self.loop.timings.summary()}"
+        )
 
     # ----- camera -----
 

@@ -4,7 +4,7 @@ viser reports a client's camera as `wxyz` (the rotation camera -> world), `posit
 centre), `fov` (vertical field of view in radians) and the canvas size, in the OpenCV convention
 our `Camera` uses too (x right, y down, z forward). Pointer positions arrive normalised to the
 canvas, `(0, 0)` the top-left corner and `(1, 1)` the bottom-right one; viser already puts an
-integer CSS pixel at its centre (+0.5), so in our continuous pixel coordinates (DESIGN.md) a
+integer CSS pixel at its centre (+0.5), so in our continuous pixel coordinates (docs/conventions.md) a
 pointer at `(u, v)` is the pixel point `(u * W, v * H)` of an image of any size `W x H` with that
 aspect ratio. (The issue's `px = u*W - 0.5` is the same point in pixel-index convention.)
 """
@@ -30,11 +30,13 @@ def quat_to_matrix(wxyz: Sequence[float] | np.ndarray) -> np.ndarray:
     if not np.isfinite(norm) or norm == 0:
         raise CameraError(f"camera rotation: not a quaternion: {tuple(q)}")
     w, x, y, z = q / norm
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def camera_from_viser(
@@ -68,10 +70,14 @@ def camera_from_viser(
     world_to_camera[:3, :3] = camera_to_world.T
     world_to_camera[:3, 3] = -camera_to_world.T @ centre
     return Camera(
-        width, height,
-        fx=width / (2 * aspect * tan_half), fy=height / (2 * tan_half),
-        cx=width / 2, cy=height / 2,
-        world_to_camera=world_to_camera, name="viewer",
+        width,
+        height,
+        fx=width / (2 * aspect * tan_half),
+        fy=height / (2 * tan_half),
+        cx=width / 2,
+        cy=height / 2,
+        world_to_camera=world_to_camera,
+        name="viewer",
     )
 
 
@@ -91,7 +97,9 @@ def viser_view(camera: Camera, look_distance: float = 1.0) -> ViserView:
     c2w = camera.camera_to_world
     centre, forward, down = c2w[:3, 3], c2w[:3, 2], c2w[:3, 1]
     return ViserView(
-        tuple(centre.tolist()), tuple((centre + look_distance * forward).tolist()), tuple((-down).tolist()),
+        tuple(centre.tolist()),
+        tuple((centre + look_distance * forward).tolist()),
+        tuple((-down).tolist()),
         math.radians(camera.fov_y_deg),
     )
 

@@ -85,8 +85,9 @@ class SceneDisplay:
         on_handle_drag: called with (rod id, event) when a rod's handle is dragged.
     """
 
-    def __init__(self, server: viser.ViserServer, scene: GaussianScene, update: SplatUpdate,
-                 on_handle_drag: HandleDrag) -> None:
+    def __init__(
+        self, server: viser.ViserServer, scene: GaussianScene, update: SplatUpdate, on_handle_drag: HandleDrag
+    ) -> None:
         if update not in SPLAT_UPDATES:
             raise ValueError(f"splat update: expected one of {SPLAT_UPDATES}, got {update!r}")
         self.server = server
@@ -119,7 +120,8 @@ class SceneDisplay:
         keep[owned] = False
         part = (self.splats if keep.all() else self.splats.subset(np.flatnonzero(keep))).in_unit(self.unit)
         self._scene_node = self.server.scene.add_gaussian_splats(
-            "/scene", part.centers, part.covariances, part.rgbs, part.opacities, scale=self.unit)
+            "/scene", part.centers, part.covariances, part.rgbs, part.opacities, scale=self.unit
+        )
         return time.perf_counter() - clock
 
     # ----- rods -----
@@ -132,31 +134,48 @@ class SceneDisplay:
         part = self.splats.subset(ids)
         if self.update == "exact":
             local = part.in_unit(self.unit)
-            splats.append(self.server.scene.add_gaussian_splats(
-                f"{base}/splats", local.centers, local.covariances, local.rgbs, local.opacities, scale=self.unit))
+            splats.append(
+                self.server.scene.add_gaussian_splats(
+                    f"{base}/splats", local.centers, local.covariances, local.rgbs, local.opacities, scale=self.unit
+                )
+            )
         else:
             rest = np.asarray(entry.rod.rest_positions, np.float64)
             for j in np.unique(entry.bound.segment):
                 # each node holds its Gaussians relative to the segment's first vertex at rest
                 piece = part.subset(np.flatnonzero(entry.bound.segment == j)).in_unit(self.unit, rest[j])
-                splats.append(self.server.scene.add_gaussian_splats(
-                    f"{base}/segment_{j}", piece.centers, piece.covariances, piece.rgbs, piece.opacities,
-                    scale=self.unit, position=rest[j]))
+                splats.append(
+                    self.server.scene.add_gaussian_splats(
+                        f"{base}/segment_{j}",
+                        piece.centers,
+                        piece.covariances,
+                        piece.rgbs,
+                        piece.opacities,
+                        scale=self.unit,
+                        position=rest[j],
+                    )
+                )
                 segments.append(int(j))
         positions = np.asarray(entry.rod.positions, np.float32)
         polyline = self.server.scene.add_line_segments(
-            f"{base}/polyline", polyline_segments(positions), POLYLINE_COLOUR, thickness=3.0,
-            thickness_units="screen")
+            f"{base}/polyline", polyline_segments(positions), POLYLINE_COLOUR, thickness=3.0, thickness_units="screen"
+        )
         count = len(positions)
         colours = self._handle_colours(entry, None)
         vertices, faces = self._sphere
         handles = self.server.scene.add_batched_meshes_simple(
-            f"{base}/handles", vertices, faces,
+            f"{base}/handles",
+            vertices,
+            faces,
             batched_wxyzs=np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (count, 1)),
             batched_positions=positions,
             batched_scales=np.full(count, HANDLE_SCALE * entry.extraction.radius, np.float32),
-            batched_colors=colours, batched_opacities=self._handle_opacities(colours),
-            opacity=1.0, cast_shadow=False, receive_shadow=False, visible=self.show_handles,
+            batched_colors=colours,
+            batched_opacities=self._handle_opacities(colours),
+            opacity=1.0,
+            cast_shadow=False,
+            receive_shadow=False,
+            visible=self.show_handles,
         )
         rod_id = entry.id
 
@@ -167,15 +186,19 @@ class SceneDisplay:
 
         handles.on_drag("left")(dragged)
         segmented = self.server.scene.add_point_cloud(
-            f"{base}/segmented", self.splats.centers[ids], SEGMENT_COLOUR,
-            point_size=max(entry.extraction.radius * 0.15, 1e-6), point_shape="circle",
+            f"{base}/segmented",
+            self.splats.centers[ids],
+            SEGMENT_COLOUR,
+            point_size=max(entry.extraction.radius * 0.15, 1e-6),
+            point_shape="circle",
             visible=self.show_segmented,
         )
         poses = np.zeros((len(segments), 7))
         poses[:, 0] = 1.0
         poses[:, 4:] = np.asarray(entry.rod.rest_positions, np.float64)[segments]
-        self._rods[entry.id] = RodNodes(splats, segments, part, SplatPacker(part.rgbs, part.opacities),
-                                        poses, polyline, handles, segmented, colours)
+        self._rods[entry.id] = RodNodes(
+            splats, segments, part, SplatPacker(part.rgbs, part.opacities), poses, polyline, handles, segmented, colours
+        )
 
     def remove_rod(self, rod_id: int) -> None:
         nodes = self._rods.pop(rod_id, None)
@@ -207,10 +230,13 @@ class SceneDisplay:
                     ids = entry.gaussian_ids
                     unit = np.float32(self.unit)
                     nodes.splats[0].buffer = nodes.packer.pack(
-                        rods.means[ids] / unit, covariance_triu(rods.scales[ids] / unit, rods.quats[ids]))
+                        rods.means[ids] / unit, covariance_triu(rods.scales[ids] / unit, rods.quats[ids])
+                    )
                 else:
-                    poses = np.concatenate([matrices_to_quats(entry.edge_rotations()),
-                                            np.asarray(entry.rod.positions, np.float64)[:-1]], axis=1)[nodes.segments]
+                    poses = np.concatenate(
+                        [matrices_to_quats(entry.edge_rotations()), np.asarray(entry.rod.positions, np.float64)[:-1]],
+                        axis=1,
+                    )[nodes.segments]
                     # setting a pose costs tens of microseconds in viser: send only the ones that moved
                     moved = np.abs(poses - nodes.sent_poses).max(axis=1) > POSE_TOLERANCE * max(entry.length, 1e-12)
                     for k in np.flatnonzero(moved):
@@ -253,8 +279,12 @@ class SceneDisplay:
                 if self._stroke is not None:
                     self._stroke.remove()
                 self._stroke = self.server.scene.add_line_segments(
-                    "/sketch/stroke", segments, FAILED_STROKE_COLOUR if failed else STROKE_COLOUR, thickness=3.0,
-                    thickness_units="screen")
+                    "/sketch/stroke",
+                    segments,
+                    FAILED_STROKE_COLOUR if failed else STROKE_COLOUR,
+                    thickness=3.0,
+                    thickness_units="screen",
+                )
                 self._stroke_failed = failed
             else:
                 self._stroke.points = segments

@@ -30,18 +30,34 @@ class Panel:
         self.mode_text = gui.add_markdown(self.mode_markdown("View"))
         with gui.add_folder("Sketch"):
             self.auto_radius = gui.add_checkbox("Auto radius", True, hint="estimate R from the image and the Gaussians")
-            self.radius = gui.add_number("Radius R", 0.01, min=1e-6, step=1e-4, disabled=True,
-                                         hint="object radius in scene units")
-            self.alpha = gui.add_number("Alpha", 1.0, min=0.0, step=0.1, hint="weight of the stroke distance (paper Eq. 1)")
-            self.edge_length = gui.add_number("Edge length", 0.0, min=0.0, step=1e-3,
-                                              hint="rod edge length in scene units; 0 for the default")
-            self.working_width = gui.add_number("Working width", working_width, min=64, max=4096, step=1,
-                                                hint="pixels across the render the stroke is traced on")
-            self.attach = gui.add_checkbox("Attached parts follow", True,
-                                           hint="small parts joined to the rod (leaves, a tag) ride with it")
+            self.radius = gui.add_number(
+                "Radius R", 0.01, min=1e-6, step=1e-4, disabled=True, hint="object radius in scene units"
+            )
+            self.alpha = gui.add_number(
+                "Alpha", 1.0, min=0.0, step=0.1, hint="weight of the stroke distance (paper Eq. 1)"
+            )
+            self.edge_length = gui.add_number(
+                "Edge length", 0.0, min=0.0, step=1e-3, hint="rod edge length in scene units; 0 for the default"
+            )
+            self.working_width = gui.add_number(
+                "Working width",
+                working_width,
+                min=64,
+                max=4096,
+                step=1,
+                hint="pixels across the render the stroke is traced on",
+            )
+            self.attach = gui.add_checkbox(
+                "Attached parts follow", True, hint="small parts joined to the rod (leaves, a tag) ride with it"
+            )
         with gui.add_folder("Rod material"):
-            self.youngs_modulus = gui.add_number("Stiffness E (Pa)", params.youngs_modulus, min=1.0, step=1e5,
-                                                 hint="Young's modulus; changing it restarts the rods from rest")
+            self.youngs_modulus = gui.add_number(
+                "Stiffness E (Pa)",
+                params.youngs_modulus,
+                min=1.0,
+                step=1e5,
+                hint="Young's modulus; changing it restarts the rods from rest",
+            )
             self.damping = gui.add_number("Damping (1/s)", params.damping, min=0.0, step=0.1)
             self.density = gui.add_number("Density (kg/m³)", params.density, min=1e-3, step=10.0)
             self.gravity = gui.add_checkbox("Gravity", any(params.gravity), hint="9.81 m/s² along the scene's down")
@@ -72,9 +88,14 @@ class Panel:
 
     def rod_params(self, down: Any) -> RodParams:
         """The material in the panel; `down` is the scene's (3,) unit down direction."""
-        gravity = tuple(float(GRAVITY * d) for d in down) if self.gravity.value else (0.0, 0.0, 0.0)
-        return RodParams(youngs_modulus=float(self.youngs_modulus.value), damping=float(self.damping.value),
-                         density=float(self.density.value), gravity=gravity)
+        g = [float(GRAVITY * d) for d in down] if self.gravity.value else [0.0, 0.0, 0.0]
+        gravity = (g[0], g[1], g[2])
+        return RodParams(
+            youngs_modulus=float(self.youngs_modulus.value),
+            damping=float(self.damping.value),
+            density=float(self.density.value),
+            gravity=gravity,
+        )
 
     def material_inputs(self) -> list[Any]:
         return [self.youngs_modulus, self.damping, self.density, self.gravity]

@@ -17,9 +17,9 @@ import numpy as np
 
 from ..errors import SketchRodGSError
 from ..extract import Extraction
+from ..rig import Rig, clamped_end_weights
 from ..rod import Rod, RodParams, World
 from ..scene import GaussianScene
-from ..rig import Rig, clamped_end_weights
 from ..skin import BoundRod, skin_into
 
 # A rod sleeps (is no longer stepped or sent) once no vertex moved more than this fraction of
@@ -87,8 +87,14 @@ class RodSet:
             consistently.
     """
 
-    def __init__(self, scene: GaussianScene, params: RodParams = RodParams(), clamp_ends: bool = True,
-                 skin_each_frame: bool = True, subdivide: bool = True) -> None:
+    def __init__(
+        self,
+        scene: GaussianScene,
+        params: RodParams = RodParams(),
+        clamp_ends: bool = True,
+        skin_each_frame: bool = True,
+        subdivide: bool = True,
+    ) -> None:
         self.input_scene = scene
         self.scene = scene
         self.source = np.arange(len(scene), dtype=np.int64)
@@ -247,8 +253,9 @@ class RodSet:
             setattr(self, field, np.ascontiguousarray(grown))
         polyline = np.asarray(extraction.polyline, np.float64)
         length = float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
-        return RodEntry(rod_id, extraction, rod, rig.bound[0], np.array(rod.edge_frames, np.float64), length,
-                        pieces, split)
+        return RodEntry(
+            rod_id, extraction, rod, rig.bound[0], np.array(rod.edge_frames, np.float64), length, pieces, split
+        )
 
     # ----- interaction -----
 

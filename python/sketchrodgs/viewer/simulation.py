@@ -70,8 +70,13 @@ class SimulationLoop:
         on_frame: called after each pushed frame (from the thread) with the timings.
     """
 
-    def __init__(self, rods: RodSet, display: SceneDisplay, fps: float = 60.0,
-                 on_frame: Callable[[dict[str, float]], None] | None = None) -> None:
+    def __init__(
+        self,
+        rods: RodSet,
+        display: SceneDisplay,
+        fps: float = 60.0,
+        on_frame: Callable[[dict[str, float]], None] | None = None,
+    ) -> None:
         if not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps: must be > 0, got {fps}")
         self.rods = rods

@@ -75,5 +75,12 @@ def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> E
     """
     if len(stroke.screen) < 2:
         raise SketchRodGSError("the stroke is a single point: drag across the object")
-    return extract_rod(scene, stroke.camera, stroke.pixels(), settings.radius, alpha=settings.alpha,
-                       edge_length=settings.edge_length, attach=settings.attach)
+    return extract_rod(
+        scene,
+        stroke.camera,
+        stroke.pixels(),
+        settings.radius,
+        alpha=settings.alpha,
+        edge_length=settings.edge_length,
+        attach=settings.attach,
+    )

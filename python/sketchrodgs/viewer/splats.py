@@ -132,5 +132,9 @@ class SplatArrays:
     def in_unit(self, unit: float, origin: np.ndarray | None = None) -> SplatArrays:
         """The same Gaussians in a node of scale `unit` placed at `origin` (default 0)."""
         centers = self.centers if origin is None else self.centers - np.asarray(origin, np.float32)
-        return SplatArrays(np.ascontiguousarray(centers / np.float32(unit), np.float32),
-                           self.covariances / np.float32(unit * unit), self.rgbs, self.opacities)
+        return SplatArrays(
+            np.ascontiguousarray(centers / np.float32(unit), np.float32),
+            self.covariances / np.float32(unit * unit),
+            self.rgbs,
+            self.opacities,
+        )

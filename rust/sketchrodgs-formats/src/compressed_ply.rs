@@ -57,7 +57,13 @@ pub fn decode(packed: &Packed<'_>, out: SplatsMut<'_>) -> Result<(), SizeError> 
         unit_8: fractions(255),
         rotation: table(1024, |i| (i / 1023.0 - 0.5) * std::f64::consts::SQRT_2),
         sh: table(256, |b| {
-            let t = if b == 0.0 { 0.0 } else if b == 255.0 { 1.0 } else { (b + 0.5) / 256.0 };
+            let t = if b == 0.0 {
+                0.0
+            } else if b == 255.0 {
+                1.0
+            } else {
+                (b + 0.5) / 256.0
+            };
             8.0 * (t - 0.5)
         }),
     };
@@ -82,7 +88,11 @@ fn decode_block(p: &Packed<'_>, t: &Tables, block: Block<'_>) {
         // the PlayCanvas decoder's lerp: min * (1 - t) + max * t, in f64
         let lerp = |low: f64, high: f64, t: f64| low * (1.0 - t) + high * t;
         let fields = |packed: u32| {
-            [t.unit_11[(packed >> 21) as usize & 0x7FF], t.unit_10[(packed >> 11) as usize & 0x3FF], t.unit_11[packed as usize & 0x7FF]]
+            [
+                t.unit_11[(packed >> 21) as usize & 0x7FF],
+                t.unit_10[(packed >> 11) as usize & 0x3FF],
+                t.unit_11[packed as usize & 0x7FF],
+            ]
         };
         let (position, scale) = (fields(position), fields(scale));
         for axis in 0..3 {
@@ -126,7 +136,8 @@ mod tests {
 
     #[test]
     fn one_splat_written_bit_by_bit() {
-        let bounds = [0.0, -1.0, 10.0, 2047.0, 1.0, 20.0, -5.0, -5.0, -5.0, -1.0, -3.0, -5.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.5];
+        let bounds =
+            [0.0, -1.0, 10.0, 2047.0, 1.0, 20.0, -5.0, -5.0, -5.0, -1.0, -3.0, -5.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.5];
         let position: u32 = (2047 << 21) | 1023; // x = max, y = min, z = 1023/2047 of the range
         let rotation: u32 = (2 << 30) | (1023 << 20) | 512; // largest is rot_2 (y)
         let scale: u32 = (1023 << 11) | 2047;
@@ -137,8 +148,16 @@ mod tests {
         }
         let rest = [0, 255, 128, 1, 2, 3, 4, 5, 6];
         let packed = Packed { bounds: &bounds, bound_columns: BOUNDS_WITH_COLORS, splats: &[splat], sh_rest: &rest };
-        let (mut means, mut scales, mut quats, mut opacities, mut sh) = (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 12]);
-        let out = SplatsMut { means: &mut means, scales: &mut scales, quats: &mut quats, opacities: &mut opacities, sh: &mut sh, sh_coefficients: 4 };
+        let (mut means, mut scales, mut quats, mut opacities, mut sh) =
+            (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 12]);
+        let out = SplatsMut {
+            means: &mut means,
+            scales: &mut scales,
+            quats: &mut quats,
+            opacities: &mut opacities,
+            sh: &mut sh,
+            sh_coefficients: 4,
+        };
         decode(&packed, out).unwrap_or_else(|e| unreachable!("{e}"));
         assert_eq!(means, [2047.0, -1.0, (10.0 + 10.0 * 1023.0 / 2047.0) as f32]);
         assert_eq!(scales, [(-5.0_f64).exp() as f32, (-3.0_f64).exp() as f32, (-5.0_f64).exp() as f32]);
@@ -148,12 +167,17 @@ mod tests {
         let dc: Vec<f32> = rgb.iter().map(|c| (c - 0.5) / SH_C0 as f32).collect();
         assert_eq!(&sh[..3], dc.as_slice());
         // |stored| > 1: the largest component is 0 and the quaternion rescaled
-        let (a, b, c) = (0.5 * std::f64::consts::SQRT_2, -0.5 * std::f64::consts::SQRT_2, (512.0 / 1023.0 - 0.5) * std::f64::consts::SQRT_2);
+        let (a, b, c) = (
+            0.5 * std::f64::consts::SQRT_2,
+            -0.5 * std::f64::consts::SQRT_2,
+            (512.0 / 1023.0 - 0.5) * std::f64::consts::SQRT_2,
+        );
         let norm = (a * a + b * b + c * c).sqrt();
         assert!(quats.iter().zip([a / norm, b / norm, 0.0, c / norm]).all(|(&q, e)| (f64::from(q) - e).abs() < 2e-6));
         // channel-major bytes: f_rest_{c*3+j} is basis j+1 of channel c; 0 and 255 are -4 and 4
         let value = |b: f64| 8.0 * ((b + 0.5) / 256.0 - 0.5);
-        let expected = [[-4.0, value(1.0), value(4.0)], [4.0, value(2.0), value(5.0)], [value(128.0), value(3.0), value(6.0)]];
+        let expected =
+            [[-4.0, value(1.0), value(4.0)], [4.0, value(2.0), value(5.0)], [value(128.0), value(3.0), value(6.0)]];
         for (j, row) in expected.iter().enumerate() {
             for (channel, &e) in row.iter().enumerate() {
                 assert_eq!(sh[3 * (j + 1) + channel], e as f32);

@@ -142,9 +142,17 @@ mod tests {
     #[test]
     fn blocks_cover_every_splat_once() {
         let n = 2 * BLOCK + 17;
-        let (mut means, mut scales, mut quats, mut opacities) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 4 * n], vec![0.0; n]);
+        let (mut means, mut scales, mut quats, mut opacities) =
+            (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 4 * n], vec![0.0; n]);
         let mut sh = vec![0.0; 12 * n];
-        let out = SplatsMut { means: &mut means, scales: &mut scales, quats: &mut quats, opacities: &mut opacities, sh: &mut sh, sh_coefficients: 4 };
+        let out = SplatsMut {
+            means: &mut means,
+            scales: &mut scales,
+            quats: &mut quats,
+            opacities: &mut opacities,
+            sh: &mut sh,
+            sh_coefficients: 4,
+        };
         assert_eq!(out.count(), Ok(n));
         out.for_each_block(BLOCK, |block| {
             for (i, o) in block.opacities.iter_mut().enumerate() {
@@ -158,8 +166,16 @@ mod tests {
 
     #[test]
     fn sizes_that_disagree_are_named() {
-        let (mut a, mut b, mut c, mut d, mut e) = (vec![0.0; 6], vec![0.0; 6], vec![0.0; 8], vec![0.0; 2], vec![0.0; 5]);
-        let out = SplatsMut { means: &mut a, scales: &mut b, quats: &mut c, opacities: &mut d, sh: &mut e, sh_coefficients: 1 };
+        let (mut a, mut b, mut c, mut d, mut e) =
+            (vec![0.0; 6], vec![0.0; 6], vec![0.0; 8], vec![0.0; 2], vec![0.0; 5]);
+        let out = SplatsMut {
+            means: &mut a,
+            scales: &mut b,
+            quats: &mut c,
+            opacities: &mut d,
+            sh: &mut e,
+            sh_coefficients: 1,
+        };
         assert_eq!(out.count(), Err(SizeError { name: "sh", expected: 6, got: 5 }));
     }
 }

@@ -78,8 +78,16 @@ mod tests {
     fn records_decode_and_zero_rotations_are_named() {
         let mut records = record([1.0, -2.0, 3.5], [0.1, 0.2, 0.3], [255, 0, 128, 51], [255, 128, 128, 128]);
         records.extend(record([0.0; 3], [1.0; 3], [0; 4], [128, 128, 128, 128]));
-        let (mut means, mut scales, mut quats, mut opacities, mut sh) = (vec![0.0; 6], vec![0.0; 6], vec![0.0; 8], vec![0.0; 2], vec![0.0; 6]);
-        let out = SplatsMut { means: &mut means, scales: &mut scales, quats: &mut quats, opacities: &mut opacities, sh: &mut sh, sh_coefficients: 1 };
+        let (mut means, mut scales, mut quats, mut opacities, mut sh) =
+            (vec![0.0; 6], vec![0.0; 6], vec![0.0; 8], vec![0.0; 2], vec![0.0; 6]);
+        let out = SplatsMut {
+            means: &mut means,
+            scales: &mut scales,
+            quats: &mut quats,
+            opacities: &mut opacities,
+            sh: &mut sh,
+            sh_coefficients: 1,
+        };
         assert_eq!(decode(&records, out), Err(SplatError::ZeroQuaternion(1)));
         assert_eq!(&means[..3], &[1.0, -2.0, 3.5]);
         assert_eq!(&scales[..3], &[0.1, 0.2, 0.3]);

@@ -61,7 +61,17 @@ impl<'a> Attributes<'a> {
             rest = after;
             block
         });
-        Ok(Attributes { positions, alphas, colors, scales, rotations, sh, sh_bytes_per_splat, fractional_bits, rotation_format })
+        Ok(Attributes {
+            positions,
+            alphas,
+            colors,
+            scales,
+            rotations,
+            sh,
+            sh_bytes_per_splat,
+            fractional_bits,
+            rotation_format,
+        })
     }
 }
 
@@ -173,9 +183,17 @@ mod tests {
     type Arrays = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>);
 
     fn decode_one(payload: &[u8], rotations: Rotations, sh_bytes: usize, k: usize) -> Arrays {
-        let (mut means, mut scales, mut quats, mut opacities, mut sh) = (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 3 * k]);
+        let (mut means, mut scales, mut quats, mut opacities, mut sh) =
+            (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 3 * k]);
         let attributes = Attributes::split(payload, 1, rotations, sh_bytes, 12).unwrap_or_else(|e| unreachable!("{e}"));
-        let out = SplatsMut { means: &mut means, scales: &mut scales, quats: &mut quats, opacities: &mut opacities, sh: &mut sh, sh_coefficients: k };
+        let out = SplatsMut {
+            means: &mut means,
+            scales: &mut scales,
+            quats: &mut quats,
+            opacities: &mut opacities,
+            sh: &mut sh,
+            sh_coefficients: k,
+        };
         decode(&attributes, out).unwrap_or_else(|e| unreachable!("{e}"));
         (means, scales, quats, opacities, sh)
     }
@@ -218,9 +236,18 @@ mod tests {
     #[test]
     fn sizes_that_disagree_are_errors() {
         assert!(Attributes::split(&[0; 21], 1, Rotations::SmallestThree, 0, 12).is_err());
-        let attributes = Attributes::split(&[0; 23], 1, Rotations::SmallestThree, 3, 12).unwrap_or_else(|e| unreachable!("{e}"));
-        let (mut a, mut b, mut c, mut d, mut e) = (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 27]);
-        let out = SplatsMut { means: &mut a, scales: &mut b, quats: &mut c, opacities: &mut d, sh: &mut e, sh_coefficients: 9 };
+        let attributes =
+            Attributes::split(&[0; 23], 1, Rotations::SmallestThree, 3, 12).unwrap_or_else(|e| unreachable!("{e}"));
+        let (mut a, mut b, mut c, mut d, mut e) =
+            (vec![0.0; 3], vec![0.0; 3], vec![0.0; 4], vec![0.0; 1], vec![0.0; 27]);
+        let out = SplatsMut {
+            means: &mut a,
+            scales: &mut b,
+            quats: &mut c,
+            opacities: &mut d,
+            sh: &mut e,
+            sh_coefficients: 9,
+        };
         assert_eq!(decode(&attributes, out).err().map(|e| e.name), Some("sh bytes per splat"));
     }
 }

@@ -22,7 +22,10 @@ pub struct SceneSummary {
 /// Summarise row-major scene arrays (means, scales, quats (N, 4), opacities, sh).
 pub fn summarize(means: &[f32], scales: &[f32], quats: &[f32], opacities: &[f32], sh: &[f32]) -> SceneSummary {
     let finite = [means, scales, quats, opacities, sh].map(all_finite);
-    let scale_min = scales.par_chunks(CHUNK).map(|c| c.iter().fold(f32::INFINITY, |m, &v| m.min(v))).reduce(|| f32::INFINITY, f32::min);
+    let scale_min = scales
+        .par_chunks(CHUNK)
+        .map(|c| c.iter().fold(f32::INFINITY, |m, &v| m.min(v)))
+        .reduce(|| f32::INFINITY, f32::min);
     let opacity_range = opacities
         .par_chunks(CHUNK)
         .map(|c| c.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v))))

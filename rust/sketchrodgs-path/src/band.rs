@@ -48,8 +48,10 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
         let ab = [b[0] - a[0], b[1] - a[1]];
         let length2 = ab[0] * ab[0] + ab[1] * ab[1];
         let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
-        let (x0, x1) = (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
-        let (y0, y1) = (clip(a[1].min(b[1]) - band_px - 1.0, image.height), clip(a[1].max(b[1]) + band_px + 1.0, image.height));
+        let (x0, x1) =
+            (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
+        let (y0, y1) =
+            (clip(a[1].min(b[1]) - band_px - 1.0, image.height), clip(a[1].max(b[1]) + band_px + 1.0, image.height));
         for row in y0..=y1 {
             for col in x0..=x1 {
                 let p = row * image.width + col;

@@ -81,7 +81,12 @@ impl<'a> IndexImage<'a> {
     /// Add the accumulated opacity image (same size), used to measure the object's width.
     pub fn with_alpha(self, alpha: &'a [f32]) -> Result<Self, PathError> {
         if alpha.len() != self.index.len() {
-            return Err(PathError::ImageSize { width: self.width, height: self.height, index: self.index.len(), depth: alpha.len() });
+            return Err(PathError::ImageSize {
+                width: self.width,
+                height: self.height,
+                index: self.index.len(),
+                depth: alpha.len(),
+            });
         }
         Ok(Self { alpha: Some(alpha), ..self })
     }
@@ -90,7 +95,12 @@ impl<'a> IndexImage<'a> {
     /// that reads outside them are recorded in it.
     pub fn with_rendered(self, rendered: &'a Rendered) -> Result<Self, PathError> {
         if rendered.width != self.width || rendered.height != self.height {
-            return Err(PathError::ImageSize { width: rendered.width, height: rendered.height, index: self.index.len(), depth: self.depth.len() });
+            return Err(PathError::ImageSize {
+                width: rendered.width,
+                height: rendered.height,
+                index: self.index.len(),
+                depth: self.depth.len(),
+            });
         }
         Ok(Self { rendered: Some(rendered), ..self })
     }

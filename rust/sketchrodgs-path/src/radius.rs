@@ -32,7 +32,9 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
         .zip(&clean.points)
         .map(|(a, p)| {
             let a = (*a)?;
-            let under = image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q) && (image.depth(q) - image.depth(a)).abs() <= rough);
+            let under = image
+                .pixel_at(p[0], p[1])
+                .filter(|&q| image.covered(q) && (image.depth(q) - image.depth(a)).abs() <= rough);
             under.or(Some(a).filter(|&q| image.covered(q)))
         })
         .collect();
@@ -40,7 +42,13 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
 }
 
 /// Median half-width in world units over the samples that have a pixel.
-fn half_widths(image: &IndexImage, stroke: &CleanStroke, pixels: &[Option<usize>], focal: f32, max_px: usize) -> Option<f32> {
+fn half_widths(
+    image: &IndexImage,
+    stroke: &CleanStroke,
+    pixels: &[Option<usize>],
+    focal: f32,
+    max_px: usize,
+) -> Option<f32> {
     let mut values: Vec<f32> = pixels
         .iter()
         .zip(&stroke.normal)

@@ -60,8 +60,10 @@ pub fn trace_stroke(
     let band = label_band(image, &clean, params.band_px, gap);
     // the clean stroke starts and ends on the object, so both ends have band pixels near them
     let last = clean.points.len() - 1;
-    let endpoint =
-        |j: usize| snap(image, &band, clean.points[j], clean.arc[j], params.band_px).ok_or(PathError::StrokeBarelyOnObject { samples: 1 });
+    let endpoint = |j: usize| {
+        snap(image, &band, clean.points[j], clean.arc[j], params.band_px)
+            .ok_or(PathError::StrokeBarelyOnObject { samples: 1 })
+    };
     let mut start = endpoint(0)?;
     let goal = endpoint(last)?;
 
@@ -122,7 +124,14 @@ fn snap(image: &IndexImage, band: &Band, point: [f32; 2], arc: f32, radius: f32)
 /// past that start that no path covers yet (paper, "Occlusion"; the chain already skips samples
 /// over occluders). Counting from the start, not from the furthest pixel reached, matters where the
 /// stroke crosses itself: a pixel at the crossing can belong to the later pass.
-fn resume_point(image: &IndexImage, band: &Band, stroke: &CleanStroke, covered: &CoverMask, start: usize, band_px: f32) -> Option<usize> {
+fn resume_point(
+    image: &IndexImage,
+    band: &Band,
+    stroke: &CleanStroke,
+    covered: &CoverMask,
+    start: usize,
+    band_px: f32,
+) -> Option<usize> {
     let arc = band.arc[start];
     (0..stroke.points.len())
         .filter(|&j| stroke.arc[j] > arc && stroke.anchor[j].is_some())
@@ -188,14 +197,20 @@ impl<'a> Search<'a> {
         params: &'a TraceParams,
         gap: f32,
     ) -> Self {
-        let centre = band
-            .pixel
-            .iter()
-            .map(|&p| centres[image.id_at(p as usize) as usize].map(f64::from))
-            .collect();
+        let centre = band.pixel.iter().map(|&p| centres[image.id_at(p as usize) as usize].map(f64::from)).collect();
         let n = band.len();
         let wide = wide_penalty(image, band, stroke, params);
-        Self { image, band, params, centre, wide, gap, cost: vec![f64::INFINITY; n], previous: vec![NONE; n], touched: Vec::new() }
+        Self {
+            image,
+            band,
+            params,
+            centre,
+            wide,
+            gap,
+            cost: vec![f64::INFINITY; n],
+            previous: vec![NONE; n],
+            touched: Vec::new(),
+        }
     }
 
     /// Shortest paths from node `start`. Returns the goal if reached, else the settled node of
@@ -249,7 +264,8 @@ impl<'a> Search<'a> {
                 }
                 let deviation = f64::from(self.band.distance[b]) / half_width;
                 let step = if dx != 0 && dy != 0 { std::f64::consts::SQRT_2 } else { 1.0 };
-                let next = cost + length2.sqrt() + self.wide[b] * step + self.params.stroke_weight * deviation * deviation;
+                let next =
+                    cost + length2.sqrt() + self.wide[b] * step + self.params.stroke_weight * deviation * deviation;
                 if next < self.cost[b] {
                     if self.cost[b].is_infinite() {
                         self.touched.push(b);
@@ -322,7 +338,11 @@ impl CoverMask {
 
     fn contains(&self, point: [f32; 2]) -> bool {
         let (x, y) = (point[0].floor(), point[1].floor());
-        x >= 0.0 && y >= 0.0 && (x as usize) < self.width && (y as usize) < self.height && self.mask[y as usize * self.width + x as usize]
+        x >= 0.0
+            && y >= 0.0
+            && (x as usize) < self.width
+            && (y as usize) < self.height
+            && self.mask[y as usize * self.width + x as usize]
     }
 
     /// Fraction of the stroke's length inside the image that lies on covered pixels (sampled every

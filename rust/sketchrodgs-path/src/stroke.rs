@@ -95,12 +95,25 @@ pub(crate) fn clean_stroke(
     let candidates: Vec<Vec<Candidate>> = points
         .iter()
         .zip(&normal)
-        .map(|(&p, &n)| surfaces_near(image, p, n, reach_px, depth_gap / 3.0, slender_radius.filter(|_| focal_px > 0.0).map(|r| (r, focal_px))))
+        .map(|(&p, &n)| {
+            surfaces_near(
+                image,
+                p,
+                n,
+                reach_px,
+                depth_gap / 3.0,
+                slender_radius.filter(|_| focal_px > 0.0).map(|r| (r, focal_px)),
+            )
+        })
         .collect();
     let chain = depth_chain(&candidates, &arc, depth_gap, focal_px);
     if chain.len() < 2 {
         let on_object = candidates.iter().filter(|c| !c.is_empty()).count();
-        return Err(if on_object == 0 { PathError::StrokeOnBackground } else { PathError::StrokeBarelyOnObject { samples: on_object } });
+        return Err(if on_object == 0 {
+            PathError::StrokeOnBackground
+        } else {
+            PathError::StrokeBarelyOnObject { samples: on_object }
+        });
     }
     // trim to the chain's first and last samples; interpolate the depth between chain samples
     let (first, last) = (chain[0].0, chain[chain.len() - 1].0);

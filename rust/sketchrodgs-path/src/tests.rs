@@ -70,7 +70,8 @@ fn straight_rope_is_followed_end_to_end() {
 #[test]
 fn the_path_prefers_the_surface_nearest_the_stroke() {
     // Two ropes 8 px apart at the same depth; the stroke runs on the lower one.
-    let scene = Synthetic::new(60, 40, FOCAL, |_, row| ((10..=12).contains(&row) || (20..=22).contains(&row)).then_some(5.0));
+    let scene =
+        Synthetic::new(60, 40, FOCAL, |_, row| ((10..=12).contains(&row) || (20..=22).contains(&row)).then_some(5.0));
     let trace = scene.trace(&[[1.5, 21.5], [58.5, 20.5]], 0.05).unwrap();
     assert!(scene.rows_of(&trace.pieces[0]).iter().all(|r| (20..=22).contains(r)));
 }
@@ -78,7 +79,8 @@ fn the_path_prefers_the_surface_nearest_the_stroke() {
 #[test]
 fn an_occluding_pole_splits_the_path_and_it_resumes_behind() {
     // A rope at depth 5 passes behind a vertical pole (cols 38..=42) at depth 3.
-    let scene = Synthetic::new(80, 40, FOCAL, |col, row| if (38..=42).contains(&col) { Some(3.0) } else { rope(col, row) });
+    let scene =
+        Synthetic::new(80, 40, FOCAL, |col, row| if (38..=42).contains(&col) { Some(3.0) } else { rope(col, row) });
     let trace = scene.trace(&[[2.5, 20.5], [20.5, 20.5], [40.5, 20.5], [60.5, 20.5], [77.5, 20.5]], 0.05).unwrap();
     assert_eq!(trace.pieces.len(), 2, "{:?}", trace.pieces.iter().map(|p| p.end).collect::<Vec<_>>());
     let (first, second) = (&trace.pieces[0], &trace.pieces[1]);
@@ -96,7 +98,8 @@ fn an_occluding_pole_splits_the_path_and_it_resumes_behind() {
 #[test]
 fn the_path_does_not_jump_across_a_depth_gap_onto_an_occluder() {
     // Same pole, but a stroke whose straight line would be cheapest across it.
-    let scene = Synthetic::new(80, 40, FOCAL, |col, row| if (38..=42).contains(&col) { Some(3.0) } else { rope(col, row) });
+    let scene =
+        Synthetic::new(80, 40, FOCAL, |col, row| if (38..=42).contains(&col) { Some(3.0) } else { rope(col, row) });
     let trace = scene.trace(&[[2.5, 20.5], [77.5, 20.5]], 0.05).unwrap();
     let ids: Vec<u32> = trace.pieces.iter().flat_map(|p| p.gaussian_ids.iter().copied()).collect();
     assert!(ids.iter().all(|&k| scene.centres[k as usize][2] == 5.0));
@@ -108,8 +111,9 @@ fn forward_only_keeps_the_path_on_its_branch_at_a_crossing() {
     // A stroke that goes right along row 20, then comes back left along row 30 (a hairpin). Without
     // the forward-only rule the path could cut straight to the goal along the bottom strand.
     let scene = Synthetic::new(80, 50, FOCAL, |col, row| {
-        ((19..=21).contains(&row) && col >= 5 || (29..=31).contains(&row) && col >= 5 || (70..=74).contains(&col) && (19..=31).contains(&row))
-            .then_some(5.0)
+        (((19..=21).contains(&row) || (29..=31).contains(&row)) && col >= 5
+            || (70..=74).contains(&col) && (19..=31).contains(&row))
+        .then_some(5.0)
     });
     let trace = scene.trace(&[[6.5, 20.5], [72.5, 20.5], [72.5, 30.5], [6.5, 30.5]], 0.05).unwrap();
     assert_eq!(trace.pieces.len(), 1);
@@ -131,12 +135,17 @@ fn endpoints_a_few_pixels_off_the_object_snap_onto_it() {
 #[test]
 fn ends_that_overshoot_the_object_are_trimmed() {
     // The rope spans cols 10..70; the stroke runs 25 px past it on background at both ends.
-    let scene = Synthetic::new(100, 40, FOCAL, |col, row| ((10..70).contains(&col) && (19..=21).contains(&row)).then_some(5.0));
+    let scene =
+        Synthetic::new(100, 40, FOCAL, |col, row| ((10..70).contains(&col) && (19..=21).contains(&row)).then_some(5.0));
     let trace = scene.trace(&[[-15.0, 20.5], [50.0, 20.5], [95.0, 20.5]], 0.05).unwrap();
     assert_eq!(trace.pieces.len(), 1);
     let piece = &trace.pieces[0];
     assert_eq!(piece.end, PieceEnd::Goal);
-    assert!(piece.pixels.first().unwrap()[0] <= 11 && piece.pixels.last().unwrap()[0] >= 68, "{:?}", (piece.pixels.first(), piece.pixels.last()));
+    assert!(
+        piece.pixels.first().unwrap()[0] <= 11 && piece.pixels.last().unwrap()[0] >= 68,
+        "{:?}",
+        (piece.pixels.first(), piece.pixels.last())
+    );
     let (first, last) = (trace.clean_stroke[0][0], trace.clean_stroke.last().unwrap()[0]);
     assert!((0.0..=12.0).contains(&first) && (68.0..=80.0).contains(&last), "trimmed to {first}..{last}");
 }
@@ -145,10 +154,21 @@ fn ends_that_overshoot_the_object_are_trimmed() {
 fn an_end_on_a_neighbour_at_another_depth_is_trimmed() {
     // The stroke's last 20 px lie on a wall 2 units behind the rope: they are not part of its chain.
     let scene = Synthetic::new(100, 40, FOCAL, |col, row| {
-        if (19..=21).contains(&row) && col < 70 { Some(5.0) } else if col >= 75 { Some(7.0) } else { None }
+        if (19..=21).contains(&row) && col < 70 {
+            Some(5.0)
+        } else if col >= 75 {
+            Some(7.0)
+        } else {
+            None
+        }
     });
     let trace = scene.trace(&[[2.5, 20.5], [95.5, 20.5]], 0.05).unwrap();
-    assert_eq!(trace.pieces.len(), 1, "{:?}", trace.pieces.iter().map(|p| (p.pixels[0], p.pixels[p.pixels.len() - 1])).collect::<Vec<_>>());
+    assert_eq!(
+        trace.pieces.len(),
+        1,
+        "{:?}",
+        trace.pieces.iter().map(|p| (p.pixels[0], p.pixels[p.pixels.len() - 1])).collect::<Vec<_>>()
+    );
     assert!(trace.pieces[0].pixels.iter().all(|p| p[0] < 70));
     assert!(trace.clean_stroke.last().unwrap()[0] < 80.0);
 }
@@ -177,7 +197,10 @@ fn bad_strokes_and_parameters_are_errors() {
     let background = scene.trace(&[[2.5, 2.5], [77.5, 2.5]], 0.05).unwrap_err();
     assert_eq!(background, PathError::StrokeOnBackground);
     for radius in [0.0, -1.0, f32::NAN] {
-        assert!(matches!(scene.trace(&[[2.5, 20.5], [77.5, 20.5]], radius), Err(PathError::BadParameter { name: "radius", .. })));
+        assert!(matches!(
+            scene.trace(&[[2.5, 20.5], [77.5, 20.5]], radius),
+            Err(PathError::BadParameter { name: "radius", .. })
+        ));
     }
 }
 
@@ -262,5 +285,8 @@ fn the_radius_is_half_the_visible_width() {
     let short = estimate_radius(&scene.image(), &[[30.5, 20.5], [36.5, 20.5]], &params).unwrap();
     assert!((short - 0.075).abs() < 0.01, "R = {short}");
     let unknown_focal = TraceParams { focal_px: 0.0, ..params };
-    assert!(matches!(estimate_radius(&scene.image(), &[[2.5, 20.5], [77.5, 20.5]], &unknown_focal), Err(PathError::BadParameter { name: "focal_px", .. })));
+    assert!(matches!(
+        estimate_radius(&scene.image(), &[[2.5, 20.5], [77.5, 20.5]], &unknown_focal),
+        Err(PathError::BadParameter { name: "focal_px", .. })
+    ));
 }

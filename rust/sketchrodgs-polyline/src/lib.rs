@@ -1,6 +1,6 @@
 //! Nearest point on a 3D polyline, for many query points, within a reach.
 //!
-//! Binding Gaussians to a rod (DESIGN.md: "bind each to its nearest point on the rest polyline")
+//! Binding Gaussians to a rod (docs/deformation.md: each binds to its nearest point on the rest polyline)
 //! and recentring the extracted polyline both ask, for tens of thousands of Gaussian centres,
 //! which segment of a polyline is nearest and where on it. A uniform grid of cell size `reach`
 //! over the segments makes each query look at a handful of segments; queries run in parallel and
@@ -71,8 +71,10 @@ struct SegmentGrid {
 
 impl SegmentGrid {
     fn new(polyline: &[[f64; 3]], reach: f64) -> Self {
-        let low: [f64; 3] = std::array::from_fn(|k| polyline.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min) - reach);
-        let high: [f64; 3] = std::array::from_fn(|k| polyline.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
+        let low: [f64; 3] =
+            std::array::from_fn(|k| polyline.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min) - reach);
+        let high: [f64; 3] =
+            std::array::from_fn(|k| polyline.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
         // Keep the grid to a few million cells however small the reach is against the polyline.
         let mut cell = reach;
         while (0..3).map(|k| ((high[k] - low[k]) / cell).floor() + 1.0).product::<f64>() > 4.0e6 {
@@ -146,7 +148,11 @@ pub fn nearest_on_polyline(
                 let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
                 let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
                 let length2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-                let t = if length2 > 0.0 { ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / length2).clamp(0.0, 1.0) } else { 0.0 };
+                let t = if length2 > 0.0 {
+                    ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / length2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 let d2: f64 = (0..3).map(|k| (ap[k] - t * ab[k]).powi(2)).sum();
                 if d2 <= reach2 && best.is_none_or(|(bd, bi, _)| d2 < bd || (d2 == bd && i < bi)) {
                     best = Some((d2, i, t));
@@ -201,14 +207,15 @@ mod tests {
 
     #[test]
     fn rows_in_box_are_those_inside_in_order() {
-        let points: Vec<[f32; 3]> = (0..200_000).map(|i| [(i % 100) as f32, (i / 100 % 50) as f32, f32::NAN.min(i as f32)]).collect();
+        let points: Vec<[f32; 3]> =
+            (0..200_000).map(|i| [(i % 100) as f32, (i / 100 % 50) as f32, f32::NAN.min(i as f32)]).collect();
         let rows = super::rows_in_box(&points, [10.0, 5.0, -1.0], [12.0, 5.0, 1e9]);
-        let expected: Vec<u32> = (0..200_000u32).filter(|&i| (10..=12).contains(&(i % 100)) && i / 100 % 50 == 5).collect();
+        let expected: Vec<u32> =
+            (0..200_000u32).filter(|&i| (10..=12).contains(&(i % 100)) && i / 100 % 50 == 5).collect();
         assert_eq!(rows, expected);
         let nan = [[f32::NAN, 0.0, 0.0]];
         assert!(super::rows_in_box(&nan, [-1.0; 3], [1.0; 3]).is_empty());
     }
-
 
     /// The obvious answer: every segment, every point.
     fn brute(polyline: &[[f32; 3]], p: [f32; 3], reach: f64) -> Option<(u32, f32)> {
@@ -230,11 +237,18 @@ mod tests {
 
     #[test]
     fn matches_brute_force_on_a_winding_polyline() {
-        let polyline: Vec<[f32; 3]> =
-            (0..200).map(|i| { let s = i as f32 * 0.05; [s.cos() * (1.0 + 0.1 * s), s.sin(), 0.2 * (3.0 * s).sin()] }).collect();
+        let polyline: Vec<[f32; 3]> = (0..200)
+            .map(|i| {
+                let s = i as f32 * 0.05;
+                [s.cos() * (1.0 + 0.1 * s), s.sin(), 0.2 * (3.0 * s).sin()]
+            })
+            .collect();
         // a deterministic scatter of points around it
         let mut state = 12345_u64;
-        let mut next = || { state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5 };
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
         let points: Vec<[f32; 3]> = (0..3000).map(|_| [2.6 * next(), 2.4 * next(), 0.8 * next()]).collect();
         for reach in [0.05, 0.2, 1.0] {
             let found = nearest_on_polyline(&polyline, &points, reach).unwrap();
@@ -270,14 +284,18 @@ mod tests {
             assert!(c[1].abs() < 1e-6 && c[2].abs() < 1e-6, "{c:?}");
         }
         // a vertex with nothing around keeps its place; points without a nearest vertex are skipped
-        let (centroids, counts) = cross_section_centroids(&axis[..2], &tangents[..2], &[[9.0, 9.0, 9.0]], &[-1], 0.25, 2.2);
+        let (centroids, counts) =
+            cross_section_centroids(&axis[..2], &tangents[..2], &[[9.0, 9.0, 9.0]], &[-1], 0.25, 2.2);
         assert_eq!((centroids[0], counts[0]), (axis[0], 0));
     }
 
     #[test]
     fn bad_input_is_an_error() {
         assert_eq!(nearest_on_polyline(&[[0.0; 3]], &[], 1.0), Err(PolylineError::TooFewVertices(1)));
-        assert_eq!(nearest_on_polyline(&[[0.0; 3], [f32::NAN, 0.0, 0.0]], &[], 1.0), Err(PolylineError::NonFiniteVertex(1)));
+        assert_eq!(
+            nearest_on_polyline(&[[0.0; 3], [f32::NAN, 0.0, 0.0]], &[], 1.0),
+            Err(PolylineError::NonFiniteVertex(1))
+        );
         assert_eq!(nearest_on_polyline(&[[0.0; 3], [1.0, 0.0, 0.0]], &[], 0.0), Err(PolylineError::BadReach(0.0)));
         // a repeated vertex (zero-length segment) is fine
         let found = nearest_on_polyline(&[[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]], &[[0.5, 0.1, 0.0]], 1.0).unwrap();

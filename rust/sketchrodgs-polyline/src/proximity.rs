@@ -41,8 +41,12 @@ struct Key([i64; 3], u8);
 impl std::hash::Hash for Key {
     fn hash<H: Hasher>(&self, state: &mut H) {
         let [x, y, z] = self.0.map(|c| c as u64);
-        state.write_u64(x.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ y.wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
-            ^ z.wrapping_mul(0x1656_67b1_9e37_79f9) ^ u64::from(self.1));
+        state.write_u64(
+            x.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                ^ y.wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+                ^ z.wrapping_mul(0x1656_67b1_9e37_79f9)
+                ^ u64::from(self.1),
+        );
     }
 }
 
@@ -83,8 +87,19 @@ struct Cells {
 /// The offsets to the 13 cells "after" a cell: with the cell itself they cover every pair of
 /// neighbouring cells once.
 const HALF: [[i64; 3]; 13] = [
-    [1, -1, -1], [1, -1, 0], [1, -1, 1], [1, 0, -1], [1, 0, 0], [1, 0, 1], [1, 1, -1], [1, 1, 0], [1, 1, 1],
-    [0, 1, -1], [0, 1, 0], [0, 1, 1], [0, 0, 1],
+    [1, -1, -1],
+    [1, -1, 0],
+    [1, -1, 1],
+    [1, 0, -1],
+    [1, 0, 0],
+    [1, 0, 1],
+    [1, 1, -1],
+    [1, 1, 0],
+    [1, 1, 1],
+    [0, 1, -1],
+    [0, 1, 0],
+    [0, 1, 1],
+    [0, 0, 1],
 ];
 
 impl Cells {
@@ -188,7 +203,13 @@ pub fn linked_components(points: &[[f32; 3]], group: &[u8], link: f32) -> Result
 
 /// For each point of group `from`, the lowest-numbered point of group `to` within `link` (None
 /// where there is none, and for points of other groups).
-pub fn linked_to(points: &[[f32; 3]], group: &[u8], from: u8, to: u8, link: f32) -> Result<Vec<Option<u32>>, ProximityError> {
+pub fn linked_to(
+    points: &[[f32; 3]],
+    group: &[u8],
+    from: u8,
+    to: u8,
+    link: f32,
+) -> Result<Vec<Option<u32>>, ProximityError> {
     let cells = Cells::new(points, group, link)?;
     let mut found = vec![None; points.len()];
     if from == EXCLUDED || to == EXCLUDED {
@@ -237,7 +258,13 @@ pub struct Grown {
 
 /// Grow a part from its seeds (docs/deformation.md, "Segmentation"): the link from the seeds'
 /// own spacing, then a breadth-first search from every seed over `SEED` and `ELIGIBLE` points.
-pub fn grow(points: &[[f32; 3]], kind: &[u8], spacings: f32, link_min: f32, link_max: f32) -> Result<Grown, ProximityError> {
+pub fn grow(
+    points: &[[f32; 3]],
+    kind: &[u8],
+    spacings: f32,
+    link_min: f32,
+    link_max: f32,
+) -> Result<Grown, ProximityError> {
     if !(link_min > 0.0 && link_min <= link_max) {
         return Err(ProximityError::BadLink(link_min));
     }
@@ -402,7 +429,10 @@ mod tests {
         let mut spread_group = group.clone();
         spread_group.push(0);
         assert_eq!(&linked_components(&spread, &spread_group, link).unwrap()[..400], &labels[..]);
-        assert_eq!(linked_to(&spread, &spread_group, 0, 1, link).unwrap()[..400], linked_to(&points, &group, 0, 1, link).unwrap()[..]);
+        assert_eq!(
+            linked_to(&spread, &spread_group, 0, 1, link).unwrap()[..400],
+            linked_to(&points, &group, 0, 1, link).unwrap()[..]
+        );
     }
 
     #[test]
@@ -434,5 +464,3 @@ mod tests {
         assert_eq!(linked_to(&bad, &[0; 20], 0, 1, 0.1).unwrap_err(), ProximityError::NonFinitePoint(3));
     }
 }
-
-

@@ -10,9 +10,7 @@ pub fn contiguous<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
     array: &'a PyReadonlyArray<'_, T, D>,
     name: &str,
 ) -> PyResult<&'a [T]> {
-    array
-        .as_slice()
-        .map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
+    array.as_slice().map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
 }
 
 /// A C-contiguous mutable view of `array`, or an error that names it.
@@ -20,9 +18,7 @@ pub fn contiguous_mut<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
     array: &'a mut PyReadwriteArray<'_, T, D>,
     name: &str,
 ) -> PyResult<&'a mut [T]> {
-    array
-        .as_slice_mut()
-        .map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
+    array.as_slice_mut().map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
 }
 
 /// Check `shape` against `expected`, where `None` matches any length.
@@ -37,8 +33,9 @@ pub fn check_shape(name: &str, shape: &[usize], expected: &[Option<usize>]) -> P
 
 /// Run `f`, turning a Rust panic into a Python error instead of a `PanicException`.
 pub fn no_panic<T>(what: &str, f: impl FnOnce() -> T) -> PyResult<T> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
-        .map_err(|_| SketchRodGSError::new_err(format!("{what}: internal error (a bug in sketchrodgs; please report it)")))
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|_| {
+        SketchRodGSError::new_err(format!("{what}: internal error (a bug in sketchrodgs; please report it)"))
+    })
 }
 
 /// Reinterpret a flat row-major slice as fixed-size rows (the caller checked the shape).

@@ -17,7 +17,11 @@ fn formats_err(err: impl std::fmt::Display) -> PyErr {
 /// Inflate the gzip member in `raw` (uint8) into `out` (uint8). Returns (bytes written, whether
 /// bytes follow the member), or None when the stream holds more than `out` does.
 #[pyfunction]
-fn gunzip_into(py: Python<'_>, raw: &Bound<'_, PyArray1<u8>>, out: &Bound<'_, PyArray1<u8>>) -> PyResult<Option<(usize, bool)>> {
+fn gunzip_into(
+    py: Python<'_>,
+    raw: &Bound<'_, PyArray1<u8>>,
+    out: &Bound<'_, PyArray1<u8>>,
+) -> PyResult<Option<(usize, bool)>> {
     let raw = raw.try_readonly()?;
     let mut out = out.try_readwrite()?;
     let raw = contiguous(&raw, "raw")?;
@@ -117,12 +121,12 @@ fn decode_compressed_ply<'py>(
     let (bounds, packed, sh_rest) = (bounds.try_readonly()?, packed.try_readonly()?, sh_rest.try_readonly()?);
     check_shape("packed", packed.shape(), &[None, Some(16)])?;
     let bound_columns = bounds.shape()[1];
-    let (bounds, packed, sh_rest) = (contiguous(&bounds, "bounds")?, contiguous(&packed, "packed")?, contiguous(&sh_rest, "sh_rest")?);
+    let (bounds, packed, sh_rest) =
+        (contiguous(&bounds, "bounds")?, contiguous(&packed, "packed")?, contiguous(&sh_rest, "sh_rest")?);
     let packed = compressed_ply::Packed { bounds, bound_columns, splats: as_rows(packed), sh_rest };
     let mut arrays = SplatArrays::new(&out)?;
     let out = arrays.slices()?;
-    run_parallel(py, "decode_compressed_ply", || compressed_ply::decode(&packed, out))?
-        .map_err(formats_err)
+    run_parallel(py, "decode_compressed_ply", || compressed_ply::decode(&packed, out))?.map_err(formats_err)
 }
 
 /// Decode `.splat` records (uint8, 32 bytes each) into the scene arrays `out` (SH of the DC
@@ -153,7 +157,8 @@ fn scene_summary<'py>(
     let arrays = [means, scales, quats, opacities, sh].map(|a| a.try_readonly());
     let [means, scales, quats, opacities, sh] = arrays;
     let (means, scales, quats, opacities, sh) = (means?, scales?, quats?, opacities?, sh?);
-    let (means, scales, quats) = (contiguous(&means, "means")?, contiguous(&scales, "scales")?, contiguous(&quats, "quats")?);
+    let (means, scales, quats) =
+        (contiguous(&means, "means")?, contiguous(&scales, "scales")?, contiguous(&quats, "quats")?);
     let (opacities, sh) = (contiguous(&opacities, "opacities")?, contiguous(&sh, "sh")?);
     let found = run_parallel(py, "scene_summary", || summary::summarize(means, scales, quats, opacities, sh))?;
     Ok((found.finite, found.scale_min, found.opacity_range, found.quat_length_squared_range))

@@ -7,8 +7,8 @@ use pyo3::types::{PyDict, PyList};
 use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
-use crate::pool::run_parallel;
 use crate::errors::{PathNotFoundError, SketchRodGSError};
+use crate::pool::run_parallel;
 
 fn path_err(err: PathError) -> PyErr {
     match err {
@@ -47,13 +47,15 @@ fn trace_stroke<'py>(
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (index, depth, centres, stroke) = (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
+    let (index, depth, centres, stroke) =
+        (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
     let alpha = alpha.as_ref().map(|a| a.try_readonly()).transpose()?;
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
     check_shape("centres", centres.shape(), &[None, Some(3)])?;
     check_shape("stroke", stroke.shape(), &[None, Some(2)])?;
-    let mut image = IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?).map_err(path_err)?;
+    let mut image =
+        IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?).map_err(path_err)?;
     if let Some(alpha) = &alpha {
         check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
         image = image.with_alpha(contiguous(alpha, "alpha")?).map_err(path_err)?;
@@ -116,7 +118,8 @@ fn estimate_radius<'py>(
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<f32> {
-    let (index, depth, alpha, stroke) = (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
+    let (index, depth, alpha, stroke) =
+        (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
     check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;

@@ -6,8 +6,8 @@ use pyo3::prelude::*;
 use sketchrodgs_polyline::proximity::{self, ProximityError};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
-use crate::pool::run_parallel;
 use crate::errors::SketchRodGSError;
+use crate::pool::run_parallel;
 
 type NearestArrays<'py> = (Bound<'py, PyArray1<i32>>, Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>);
 
@@ -27,8 +27,9 @@ fn nearest_on_polyline<'py>(
     check_shape("points", points.shape(), &[None, Some(3)])?;
     let polyline: &[[f32; 3]] = as_rows(contiguous(&polyline, "polyline")?);
     let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let found = run_parallel(py, "nearest_on_polyline", || sketchrodgs_polyline::nearest_on_polyline(polyline, points, reach))?
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let found =
+        run_parallel(py, "nearest_on_polyline", || sketchrodgs_polyline::nearest_on_polyline(polyline, points, reach))?
+            .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
     let segment: Vec<i32> = found.iter().map(|n| n.map_or(-1, |n| n.segment as i32)).collect();
     let t: Vec<f32> = found.iter().map(|n| n.map_or(0.0, |n| n.t)).collect();
     let distance: Vec<f32> = found.iter().map(|n| n.map_or(f32::INFINITY, |n| n.distance)).collect();
@@ -50,6 +51,9 @@ fn rows_in_box<'py>(
     Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
 }
 
+/// (centroids (M, 3), counts (M,)).
+type Centroids<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u32>>);
+
 /// Centroids of the cross-sections of `axis` (M, 3) float64 with unit `tangents` (M, 3) float64,
 /// from `points` (N, 3) float32 tried against their `nearest_vertex` (N,) int32 (-1: none) and its
 /// neighbours. Returns (centroids (M, 3) float64, counts (M,) uint32).
@@ -62,7 +66,7 @@ fn cross_section_centroids<'py>(
     nearest_vertex: &Bound<'py, PyArray1<i32>>,
     half_width: f64,
     reach: f64,
-) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u32>>)> {
+) -> PyResult<Centroids<'py>> {
     let (axis, tangents) = (axis.try_readonly()?, tangents.try_readonly()?);
     let (points, nearest) = (points.try_readonly()?, nearest_vertex.try_readonly()?);
     let m = axis.shape()[0];
@@ -108,7 +112,8 @@ fn linked_components<'py>(
     group: &Bound<'py, PyArray1<u8>>,
     link: f32,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let labels = on_points(py, "linked_components", points, group, "group", |p, g| proximity::linked_components(p, g, link))?;
+    let labels =
+        on_points(py, "linked_components", points, group, "group", |p, g| proximity::linked_components(p, g, link))?;
     Ok(labels.iter().map(|&l| if l == u32::MAX { -1 } else { i64::from(l) }).collect::<Vec<i64>>().into_pyarray(py))
 }
 
@@ -123,7 +128,8 @@ fn linked_to<'py>(
     target: u8,
     link: f32,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let found = on_points(py, "linked_to", points, group, "group", |p, g| proximity::linked_to(p, g, source, target, link))?;
+    let found =
+        on_points(py, "linked_to", points, group, "group", |p, g| proximity::linked_to(p, g, source, target, link))?;
     Ok(found.iter().map(|n| n.map_or(-1, i64::from)).collect::<Vec<i64>>().into_pyarray(py))
 }
 
@@ -138,7 +144,8 @@ fn grow_part<'py>(
     link_min: f32,
     link_max: f32,
 ) -> PyResult<(f32, Bound<'py, PyArray1<bool>>, bool)> {
-    let grown = on_points(py, "grow_part", points, kind, "kind", |p, k| proximity::grow(p, k, spacings, link_min, link_max))?;
+    let grown =
+        on_points(py, "grow_part", points, kind, "kind", |p, k| proximity::grow(p, k, spacings, link_min, link_max))?;
     Ok((grown.link, grown.part.into_pyarray(py), grown.touched))
 }
 

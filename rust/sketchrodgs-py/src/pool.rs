@@ -19,7 +19,8 @@ fn pool() -> PyResult<Arc<ThreadPool>> {
     if let Some(pool) = slot.as_ref() {
         return Ok(Arc::clone(pool));
     }
-    let threads = std::env::var("SKETCHRODGS_NUM_THREADS").ok().and_then(|v| v.trim().parse::<usize>().ok()).unwrap_or(0);
+    let threads =
+        std::env::var("SKETCHRODGS_NUM_THREADS").ok().and_then(|v| v.trim().parse::<usize>().ok()).unwrap_or(0);
     let pool = Arc::new(
         ThreadPoolBuilder::new()
             .num_threads(threads)

@@ -7,8 +7,8 @@ use pyo3::types::PyDict;
 use sketchrodgs_raster::{Camera, RasterError, RenderMode, RenderOptions, RenderOutput, Retained, Splats, TileMask};
 
 use crate::arrays::{check_shape, contiguous};
-use crate::pool::run_parallel;
 use crate::errors::SketchRodGSError;
+use crate::pool::run_parallel;
 
 fn raster_err(err: RasterError) -> PyErr {
     SketchRodGSError::new_err(err.to_string())
@@ -170,7 +170,8 @@ impl RetainedRender {
         check_shape("means", means.shape(), &[None, Some(3)])?;
         check_shape("scales", scales.shape(), &[None, Some(3)])?;
         check_shape("quats", quats.shape(), &[None, Some(4)])?;
-        let (means, scales, quats) = (contiguous(&means, "means")?, contiguous(&scales, "scales")?, contiguous(&quats, "quats")?);
+        let (means, scales, quats) =
+            (contiguous(&means, "means")?, contiguous(&scales, "scales")?, contiguous(&quats, "quats")?);
         let retained = &mut self.retained;
         let out = run_parallel(py, "RetainedRender.frame", || retained.frame_flat(means, scales, quats).cloned())?
             .map_err(raster_err)?;

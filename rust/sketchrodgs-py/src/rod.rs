@@ -5,9 +5,7 @@ use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sketchrodgs_rod::{
-    Boundary, DMat3, DQuat, DVec3, ElasticRod, RodError, RodParams, SolverSettings, World,
-};
+use sketchrodgs_rod::{Boundary, DMat3, DQuat, DVec3, ElasticRod, RodError, RodParams, SolverSettings, World};
 
 use crate::arrays::{check_shape, contiguous, no_panic};
 use crate::errors::SimulationError;
@@ -34,20 +32,13 @@ fn matrix(array: &Bound<'_, PyArray2<f64>>, name: &str) -> PyResult<[[f64; 3]; 3
 
 fn vec3_array<'py>(py: Python<'py>, v: &[DVec3]) -> Bound<'py, PyArray2<f64>> {
     let flat: Vec<f64> = v.iter().flat_map(|p| p.to_array()).collect();
-    Array2::from_shape_vec((v.len(), 3), flat)
-        .unwrap_or_default()
-        .into_pyarray(py)
+    Array2::from_shape_vec((v.len(), 3), flat).unwrap_or_default().into_pyarray(py)
 }
 
 fn mat_array<'py>(py: Python<'py>, m: &[DMat3]) -> Bound<'py, PyArray3<f64>> {
     // Row-major 3x3 blocks: [k, row, col].
-    let flat: Vec<f64> = m
-        .iter()
-        .flat_map(|r| r.transpose().to_cols_array())
-        .collect();
-    Array3::from_shape_vec((m.len(), 3, 3), flat)
-        .unwrap_or_default()
-        .into_pyarray(py)
+    let flat: Vec<f64> = m.iter().flat_map(|r| r.transpose().to_cols_array()).collect();
+    Array3::from_shape_vec((m.len(), 3, 3), flat).unwrap_or_default().into_pyarray(py)
 }
 
 fn quat_array<'py>(py: Python<'py>, q: &[DQuat]) -> Bound<'py, PyArray2<f64>> {
@@ -59,9 +50,7 @@ fn quat_array<'py>(py: Python<'py>, q: &[DQuat]) -> Bound<'py, PyArray2<f64>> {
             [q.w, q.x, q.y, q.z]
         })
         .collect();
-    Array2::from_shape_vec((q.len(), 4), flat)
-        .unwrap_or_default()
-        .into_pyarray(py)
+    Array2::from_shape_vec((q.len(), 4), flat).unwrap_or_default().into_pyarray(py)
 }
 
 fn f64_array<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
@@ -88,9 +77,7 @@ impl RodWorld {
 impl RodWorld {
     #[new]
     fn new() -> Self {
-        Self {
-            world: World::new(),
-        }
+        Self { world: World::new() }
     }
 
     fn __len__(&self) -> usize {
@@ -112,15 +99,7 @@ impl RodWorld {
         gravity: [f64; 3],
     ) -> PyResult<usize> {
         let poly = points(polyline, "polyline")?;
-        let params = RodParams {
-            radius,
-            youngs_modulus,
-            shear_modulus,
-            poisson_ratio,
-            density,
-            damping,
-            gravity,
-        };
+        let params = RodParams { radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity };
         let rod = ElasticRod::new(&poly, params).map_err(rod_err)?;
         Ok(self.world.add(rod))
     }
@@ -152,12 +131,7 @@ impl RodWorld {
         max_halvings: u32,
         max_static_iterations: usize,
     ) -> PyResult<()> {
-        let s = SolverSettings {
-            tolerance,
-            max_iterations,
-            max_halvings,
-            max_static_iterations,
-        };
+        let s = SolverSettings { tolerance, max_iterations, max_halvings, max_static_iterations };
         s.validate().map_err(rod_err)?;
         self.world.settings = s;
         Ok(())
@@ -203,9 +177,7 @@ impl RodWorld {
         translation: [f64; 3],
     ) -> PyResult<()> {
         let r = matrix(rotation, "rotation")?;
-        self.rod_mut(rod)?
-            .move_clamp(vertex, r, translation)
-            .map_err(rod_err)
+        self.rod_mut(rod)?.move_clamp(vertex, r, translation).map_err(rod_err)
     }
 
     fn clamp_torque(&self, rod: usize, vertex: usize) -> PyResult<f64> {
@@ -230,16 +202,9 @@ impl RodWorld {
         Ok(self.rod(rod)?.grabbed().map(|(v, t)| (v, t.to_array())))
     }
 
-    fn transform(
-        &mut self,
-        rod: usize,
-        rotation: &Bound<'_, PyArray2<f64>>,
-        translation: [f64; 3],
-    ) -> PyResult<()> {
+    fn transform(&mut self, rod: usize, rotation: &Bound<'_, PyArray2<f64>>, translation: [f64; 3]) -> PyResult<()> {
         let r = matrix(rotation, "rotation")?;
-        self.rod_mut(rod)?
-            .transform(r, translation)
-            .map_err(rod_err)
+        self.rod_mut(rod)?.transform(r, translation).map_err(rod_err)
     }
 
     fn set_positions(&mut self, rod: usize, positions: &Bound<'_, PyArray2<f64>>) -> PyResult<()> {
@@ -247,11 +212,7 @@ impl RodWorld {
         self.rod_mut(rod)?.set_positions(&p).map_err(rod_err)
     }
 
-    fn set_velocities(
-        &mut self,
-        rod: usize,
-        velocities: &Bound<'_, PyArray2<f64>>,
-    ) -> PyResult<()> {
+    fn set_velocities(&mut self, rod: usize, velocities: &Bound<'_, PyArray2<f64>>) -> PyResult<()> {
         let v = points(velocities, "velocities")?;
         self.rod_mut(rod)?.set_velocities(&v).map_err(rod_err)
     }
@@ -259,29 +220,17 @@ impl RodWorld {
     /// Advances every rod by `dt` seconds, `count` times, with the GIL released. Returns per rod
     /// `(substeps, newton_iterations, rejected, converged)` summed over the calls.
     #[pyo3(signature = (dt, count = 1))]
-    fn step(
-        &mut self,
-        py: Python<'_>,
-        dt: f64,
-        count: usize,
-    ) -> PyResult<Vec<(u32, u32, u32, bool)>> {
+    fn step(&mut self, py: Python<'_>, dt: f64, count: usize) -> PyResult<Vec<(u32, u32, u32, bool)>> {
         let world = &mut self.world;
-        let reports = py
-            .detach(|| no_panic("rod step", || world.step_many(dt, count)))?
-            .map_err(rod_err)?;
-        Ok(reports
-            .iter()
-            .map(|r| (r.substeps, r.newton_iterations, r.rejected, r.converged))
-            .collect())
+        let reports = py.detach(|| no_panic("rod step", || world.step_many(dt, count)))?.map_err(rod_err)?;
+        Ok(reports.iter().map(|r| (r.substeps, r.newton_iterations, r.rejected, r.converged)).collect())
     }
 
     /// Quasi-static solve of rod `rod`: `(iterations, converged, energy)`.
     fn solve_static(&mut self, py: Python<'_>, rod: usize) -> PyResult<(u32, bool, f64)> {
         let settings = self.world.settings;
         let r = self.rod_mut(rod)?;
-        let out = py
-            .detach(|| no_panic("rod static solve", || r.solve_static(&settings)))?
-            .map_err(rod_err)?;
+        let out = py.detach(|| no_panic("rod static solve", || r.solve_static(&settings)))?.map_err(rod_err)?;
         Ok((out.iterations, out.converged, out.energy))
     }
 
@@ -293,19 +242,11 @@ impl RodWorld {
         Ok(vec3_array(py, self.rod(rod)?.velocities()))
     }
 
-    fn rest_positions<'py>(
-        &self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn rest_positions<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
         Ok(vec3_array(py, self.rod(rod)?.rest_positions()))
     }
 
-    fn rest_lengths<'py>(
-        &self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn rest_lengths<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
         Ok(f64_array(py, self.rod(rod)?.rest_lengths().to_vec()))
     }
 
@@ -313,11 +254,7 @@ impl RodWorld {
         Ok(f64_array(py, self.rod(rod)?.masses().to_vec()))
     }
 
-    fn twist_angles<'py>(
-        &self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn twist_angles<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
         Ok(f64_array(py, self.rod(rod)?.twist_angles().to_vec()))
     }
 
@@ -325,11 +262,7 @@ impl RodWorld {
         Ok(f64_array(py, self.rod(rod)?.edge_strain()))
     }
 
-    fn twisting_moment<'py>(
-        &self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn twisting_moment<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
         Ok(f64_array(py, self.rod(rod)?.twisting_moment()))
     }
 
@@ -338,11 +271,7 @@ impl RodWorld {
         Ok(mat_array(py, &self.rod(rod)?.edge_frames()))
     }
 
-    fn vertex_frames<'py>(
-        &self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    fn vertex_frames<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
         Ok(mat_array(py, &self.rod(rod)?.vertex_frames()))
     }
 
@@ -350,11 +279,7 @@ impl RodWorld {
         Ok(quat_array(py, &self.rod(rod)?.edge_quats()))
     }
 
-    fn vertex_quats<'py>(
-        &self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn vertex_quats<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
         Ok(quat_array(py, &self.rod(rod)?.vertex_quats()))
     }
 

@@ -32,7 +32,8 @@ fn skin_scatter<'py>(
     quats: &Bound<'py, PyArray2<f32>>,
     scales: &Bound<'py, PyArray2<f32>>,
 ) -> PyResult<()> {
-    let (rest, deformed, vertex_rotation) = (rest.try_readonly()?, deformed.try_readonly()?, vertex_rotation.try_readonly()?);
+    let (rest, deformed, vertex_rotation) =
+        (rest.try_readonly()?, deformed.try_readonly()?, vertex_rotation.try_readonly()?);
     let (segment, t, offset, rest_quats, rest_scales, weight, ids) = (
         segment.try_readonly()?,
         t.try_readonly()?,

@@ -86,14 +86,21 @@ struct ChunkBins {
 impl TileBins {
     /// Bins the Gaussians `order` (front to back) into the tiles of their `rects` (only the tiles
     /// of `mask`, when given); an error where the lists do not fit in memory.
-    pub fn new(camera: &Camera, rects: &[TileRect], order: &[u32], mask: Option<&TileMask>) -> Result<Self, RasterError> {
+    pub fn new(
+        camera: &Camera,
+        rects: &[TileRect],
+        order: &[u32],
+        mask: Option<&TileMask>,
+    ) -> Result<Self, RasterError> {
         let (grid_x, grid_y) = camera.tile_grid();
         let n_tiles = (grid_x * grid_y) as usize;
         // Bound the counters' memory on very large images by using longer chunks.
         let max_chunks = (MAX_CHUNK_COUNTERS / n_tiles.max(1)).max(1);
         let chunk_len = GAUSSIANS_PER_CHUNK.max(order.len().div_ceil(max_chunks)).max(1);
-        let chunks =
-            order.par_chunks(chunk_len).map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles, mask)).collect::<Result<_, _>>()?;
+        let chunks = order
+            .par_chunks(chunk_len)
+            .map(|chunk| ChunkBins::new(chunk, rects, grid_x, n_tiles, mask))
+            .collect::<Result<_, _>>()?;
         Ok(Self { grid_x, grid_y, chunks })
     }
 
@@ -118,7 +125,13 @@ impl TileBins {
 }
 
 impl ChunkBins {
-    fn new(order: &[u32], rects: &[TileRect], grid_x: u32, n_tiles: usize, mask: Option<&TileMask>) -> Result<Self, RasterError> {
+    fn new(
+        order: &[u32],
+        rects: &[TileRect],
+        grid_x: u32,
+        n_tiles: usize,
+        mask: Option<&TileMask>,
+    ) -> Result<Self, RasterError> {
         let tiles = |i: u32| {
             let r = rects.get(i as usize).copied().unwrap_or_default();
             let grid_x = grid_x as usize;

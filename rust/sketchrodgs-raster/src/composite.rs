@@ -10,8 +10,8 @@ use rayon::prelude::*;
 use crate::bin::TileBins;
 use crate::camera::Camera;
 use crate::project::{Projected, Splat2D};
-use crate::tiles::TileMask;
 use crate::simd::{F32x4, Mask4};
+use crate::tiles::TileMask;
 use crate::{ALPHA_MAX, ALPHA_MIN, RasterError, RenderMode, RenderOptions, RenderOutput, T_MIN, TILE_SIZE, try_filled};
 
 const TILE: usize = TILE_SIZE as usize;
@@ -105,7 +105,13 @@ pub fn blank(camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, R
 
 /// Blends the tiles of `mask` (all when None) from `source` into `out` (made for `camera` and
 /// `options.mode`); other tiles are left as they are.
-pub fn composite_into<S: Source>(out: &mut RenderOutput, camera: &Camera, source: &S, options: &RenderOptions, mask: Option<&TileMask>) {
+pub fn composite_into<S: Source>(
+    out: &mut RenderOutput,
+    camera: &Camera,
+    source: &S,
+    options: &RenderOptions,
+    mask: Option<&TileMask>,
+) {
     let (width, height) = (camera.width as usize, camera.height as usize);
     let with_color = options.mode == RenderMode::Full;
     let grid_x = camera.tile_grid().0 as usize;

@@ -42,9 +42,9 @@ pub mod composite;
 pub mod project;
 pub mod retained;
 mod simd;
-pub mod tiles;
 #[cfg(test)]
 mod tests;
+pub mod tiles;
 
 pub use camera::{Camera, MAX_IMAGE_SIDE};
 pub use retained::Retained;
@@ -101,7 +101,7 @@ pub(crate) fn try_filled<T: Clone>(len: usize, value: T, what: &'static str) -> 
     Ok(buffer)
 }
 
-/// The Gaussians to render, as borrowed slices (activated values, see DESIGN.md).
+/// The Gaussians to render, as borrowed slices (activated values, see docs/conventions.md).
 #[derive(Clone, Copy, Debug)]
 pub struct Splats<'a> {
     /// (N) centres in world units.
@@ -259,7 +259,12 @@ pub fn rasterize_tiles(
     render(splats, camera, options, Some(tiles))
 }
 
-fn render(splats: &Splats, camera: &Camera, options: &RenderOptions, tiles: Option<&TileMask>) -> Result<RenderOutput, RasterError> {
+fn render(
+    splats: &Splats,
+    camera: &Camera,
+    options: &RenderOptions,
+    tiles: Option<&TileMask>,
+) -> Result<RenderOutput, RasterError> {
     camera.validate()?;
     splats.validate()?;
     let with_color = options.mode == RenderMode::Full;
@@ -275,7 +280,8 @@ fn render(splats: &Splats, camera: &Camera, options: &RenderOptions, tiles: Opti
     let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles)?;
     projected.rects = Vec::new(); // compositing needs only the splats
     let sorted_at = Instant::now();
-    let mut out = composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles)?;
+    let mut out =
+        composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles)?;
     let end = Instant::now();
 
     out.n_visible = order.len();

@@ -108,7 +108,12 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
             let mut may = [false; REACH_BLOCK];
             for block in (start..end).step_by(REACH_BLOCK) {
                 let rows = block..(block + REACH_BLOCK).min(end);
-                reach.block(&splats.means[rows.clone()], &splats.scales[rows.clone()], &splats.opacities[rows.clone()], &mut may);
+                reach.block(
+                    &splats.means[rows.clone()],
+                    &splats.scales[rows.clone()],
+                    &splats.opacities[rows.clone()],
+                    &mut may,
+                );
                 for (i, _) in rows.zip(may).filter(|(_, m)| *m) {
                     if let Some((splat, rect)) = one(i).filter(|(_, rect)| mask.touches(rect)) {
                         kept.push((i as u32, splat, rect));
@@ -186,7 +191,8 @@ impl<'a> Reach<'a> {
         }
         for k in 0..REACH_BLOCK {
             let inside = u[k] + r[k] >= bx0 && u[k] - r[k] <= bx1 && v[k] + r[k] >= by0 && v[k] - r[k] <= by1;
-            may[k] = k < means.len() && near[k] && (inside || !(u[k].is_finite() && v[k].is_finite() && r[k].is_finite()));
+            may[k] =
+                k < means.len() && near[k] && (inside || !(u[k].is_finite() && v[k].is_finite() && r[k].is_finite()));
             if may[k] && inside {
                 may[k] = self.mask.touches(&tile_rect_of(u[k], v[k], r[k], self.mask.grid()));
             }
@@ -382,7 +388,7 @@ mod tests {
 
     #[test]
     fn rotation_matches_the_reference_matrix() {
-        // RASTER.md 2: R[1][0] = 2(xy + wz) for a unit (w, x, y, z).
+        // docs/rendering.md step 2: R[1][0] = 2(xy + wz) for a unit (w, x, y, z).
         let (w, x, y, z) = (0.5f32, 0.5f32, -0.5f32, 0.5f32);
         let r = rotation([w, x, y, z]);
         let expected = [

@@ -90,7 +90,8 @@ impl Retained {
         let mut statics = statics;
         statics.rects = Vec::new(); // binned: only the splats are read from here on
         let k = splats.sh_coeffs;
-        let sh = moving.iter().flat_map(|&r| &splats.sh[r as usize * k * 3..(r as usize + 1) * k * 3]).copied().collect();
+        let sh =
+            moving.iter().flat_map(|&r| &splats.sh[r as usize * k * 3..(r as usize + 1) * k * 3]).copied().collect();
         let opacities = moving.iter().map(|&r| splats.opacities[r as usize]).collect();
         let image = blank(camera, options)?;
         let (grid_x, grid_y) = camera.tile_grid();
@@ -120,7 +121,11 @@ impl Retained {
 
     /// [`Retained::frame`] from flat row-major arrays (means and scales N*3, quats N*4).
     pub fn frame_flat(&mut self, means: &[f32], scales: &[f32], quats: &[f32]) -> Result<&RenderOutput, RasterError> {
-        let rows = |name: &'static str, width: usize, len: usize| RasterError::LengthMismatch { name, expected: self.n * width, got: len };
+        let rows = |name: &'static str, width: usize, len: usize| RasterError::LengthMismatch {
+            name,
+            expected: self.n * width,
+            got: len,
+        };
         let m: &[Vec3] = bytemuck::try_cast_slice(means).map_err(|_| rows("means", 3, means.len()))?;
         let s: &[Vec3] = bytemuck::try_cast_slice(scales).map_err(|_| rows("scales", 3, scales.len()))?;
         let q: &[[f32; 4]] = bytemuck::try_cast_slice(quats).map_err(|_| rows("quats", 4, quats.len()))?;
@@ -173,10 +178,13 @@ impl Retained {
         let dirty: Vec<bool> = touched.iter().zip(&self.touched).map(|(a, b)| *a || *b).collect();
         let statics = &self.statics;
         let static_bins = &self.static_bins;
-        let lists: Vec<Vec<u32>> = (0..n_tiles)
-            .into_par_iter()
-            .map(|t| if dirty[t] { merge(statics, static_bins.tile_lists(t), &moving, &per_tile[t]) } else { Vec::new() })
-            .collect();
+        let lists: Vec<Vec<u32>> =
+            (0..n_tiles)
+                .into_par_iter()
+                .map(|t| {
+                    if dirty[t] { merge(statics, static_bins.tile_lists(t), &moving, &per_tile[t]) } else { Vec::new() }
+                })
+                .collect();
         let sorted_at = std::time::Instant::now();
         let mask = TileMask::new(&self.camera, dirty)?;
         let source = Merged { statics, moving: &moving, lists };
@@ -196,7 +204,12 @@ impl Retained {
 
 /// One tile's static list (entries of `statics`, front to back) and moving list (entries of
 /// `moving`) merged front to back, ties by scene row; moving entries offset by `MOVING`.
-fn merge<'a>(statics: &Projected, lists: impl Iterator<Item = &'a [u32]>, moving: &Projected, tile: &[u32]) -> Vec<u32> {
+fn merge<'a>(
+    statics: &Projected,
+    lists: impl Iterator<Item = &'a [u32]>,
+    moving: &Projected,
+    tile: &[u32],
+) -> Vec<u32> {
     let key = |p: &Projected, i: u32| (p.splats[i as usize].depth.to_bits(), p.id(i as usize));
     let mut out = Vec::with_capacity(tile.len());
     let mut m = tile.iter().peekable();
@@ -234,7 +247,8 @@ mod tests {
         };
         let n = 3000;
         let k = 4;
-        let mut means: Vec<Vec3> = (0..n).map(|_| Vec3::new(next() * 2.0 - 1.0, next() * 2.0 - 1.0, 1.0 + 3.0 * next())).collect();
+        let mut means: Vec<Vec3> =
+            (0..n).map(|_| Vec3::new(next() * 2.0 - 1.0, next() * 2.0 - 1.0, 1.0 + 3.0 * next())).collect();
         let scales: Vec<Vec3> = (0..n).map(|_| Vec3::new(0.002 + 0.05 * next(), 0.01, 0.002 + 0.05 * next())).collect();
         let quats: Vec<[f32; 4]> = (0..n).map(|_| [next() - 0.5, next() - 0.5, next() - 0.5, next() - 0.5]).collect();
         let opacities: Vec<f32> = (0..n).map(|_| next()).collect();
@@ -254,10 +268,15 @@ mod tests {
         for mode in [RenderMode::Full, RenderMode::IndexOnly] {
             let options = RenderOptions { background: [0.3, 0.2, 0.1], mode };
             let splats = |means: &[Vec3], quats: &[[f32; 4]]| {
-                rasterize(&Splats { means, scales: &scales, quats, opacities: &opacities, sh: &sh, sh_coeffs: k }, &camera, &options)
-                    .unwrap()
+                rasterize(
+                    &Splats { means, scales: &scales, quats, opacities: &opacities, sh: &sh, sh_coeffs: k },
+                    &camera,
+                    &options,
+                )
+                .unwrap()
             };
-            let first = Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: k };
+            let first =
+                Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: k };
             let mut retained = Retained::new(&first, &camera, &options, &moving).unwrap();
             let (mut means, mut quats) = (means.clone(), quats.clone());
             for frame in 0..4 {

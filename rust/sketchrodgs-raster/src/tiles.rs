@@ -65,7 +65,10 @@ impl TileMask {
     /// Bounding box `[x0, y0, x1, y1)` of the rendered tiles, in tiles (all zero when none is).
     pub fn tile_box(&self) -> [usize; 4] {
         let on = |t: &usize| self.on[*t];
-        let (xs, ys) = ((0..self.on.len()).filter(on).map(|t| t % self.grid_x), (0..self.on.len()).filter(on).map(|t| t / self.grid_x));
+        let (xs, ys) = (
+            (0..self.on.len()).filter(on).map(|t| t % self.grid_x),
+            (0..self.on.len()).filter(on).map(|t| t / self.grid_x),
+        );
         match (xs.clone().min(), xs.max(), ys.clone().min(), ys.max()) {
             (Some(x0), Some(x1), Some(y0), Some(y1)) => [x0, y0, x1 + 1, y1 + 1],
             _ => [0; 4],
@@ -98,7 +101,15 @@ mod tests {
 
     fn camera(width: u32, height: u32) -> Camera {
         let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
-        Camera { width, height, fx: 50.0, fy: 50.0, cx: 0.5 * width as f64, cy: 0.5 * height as f64, world_to_camera: identity }
+        Camera {
+            width,
+            height,
+            fx: 50.0,
+            fy: 50.0,
+            cx: 0.5 * width as f64,
+            cy: 0.5 * height as f64,
+            world_to_camera: identity,
+        }
     }
 
     #[test]

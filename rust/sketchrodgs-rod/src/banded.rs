@@ -22,11 +22,7 @@ impl BandedMatrix {
     /// Zero matrix of size `n` with half-bandwidth `bw` (capped at `n - 1`).
     pub fn new(n: usize, bw: usize) -> Self {
         let bw = bw.min(n.saturating_sub(1));
-        Self {
-            n,
-            bw,
-            data: vec![0.0; n * (bw + 1)],
-        }
+        Self { n, bw, data: vec![0.0; n * (bw + 1)] }
     }
 
     pub fn size(&self) -> usize {
@@ -44,11 +40,7 @@ impl BandedMatrix {
     /// Entry `(i, j)` of the symmetric matrix (zero outside the band).
     pub fn get(&self, i: usize, j: usize) -> f64 {
         let (i, j) = if i >= j { (i, j) } else { (j, i) };
-        if i - j > self.bw {
-            0.0
-        } else {
-            self.data[i * (self.bw + 1) + (i - j)]
-        }
+        if i - j > self.bw { 0.0 } else { self.data[i * (self.bw + 1) + (i - j)] }
     }
 
     /// Adds `v` to entry `(i, j)` with `i >= j`, `i - j <= bw`.
@@ -162,7 +154,6 @@ mod tests {
     use super::*;
     use crate::test_rng::lcg;
 
-
     #[test]
     fn solves_random_banded_spd_system_like_dense() {
         let mut seed = 7;
@@ -196,10 +187,7 @@ mod tests {
         a.add_diag(0, 1.0);
         a.add_diag(1, -1.0);
         a.add_diag(2, 1.0);
-        assert_eq!(
-            a.clone().factorize(1e-14),
-            Err(NotPositiveDefinite { row: 1 })
-        );
+        assert_eq!(a.clone().factorize(1e-14), Err(NotPositiveDefinite { row: 1 }));
         a.add_lower(1, 0, 5.0);
         a.fix(1);
         assert_eq!(a.get(1, 0), 0.0);

@@ -100,10 +100,7 @@ impl Add<f64> for D {
     type Output = D;
     #[inline]
     fn add(self, o: f64) -> D {
-        D {
-            v: self.v + o,
-            d: self.d,
-        }
+        D { v: self.v + o, d: self.d }
     }
 }
 
@@ -111,10 +108,7 @@ impl Sub<f64> for D {
     type Output = D;
     #[inline]
     fn sub(self, o: f64) -> D {
-        D {
-            v: self.v - o,
-            d: self.d,
-        }
+        D { v: self.v - o, d: self.d }
     }
 }
 
@@ -150,11 +144,7 @@ impl V {
     /// A vector with value `v` and derivative `dv[k]` along local variable `k`.
     #[inline]
     pub fn from_parts(v: DVec3, dv: &[DVec3; NV]) -> Self {
-        let mut out = Self {
-            x: D::cst(v.x),
-            y: D::cst(v.y),
-            z: D::cst(v.z),
-        };
+        let mut out = Self { x: D::cst(v.x), y: D::cst(v.y), z: D::cst(v.z) };
         for (k, g) in dv.iter().enumerate() {
             out.x.d[k] = g.x;
             out.y.d[k] = g.y;
@@ -181,20 +171,12 @@ impl V {
 
     #[inline]
     pub fn cross(self, o: V) -> V {
-        V {
-            x: self.y * o.z - self.z * o.y,
-            y: self.z * o.x - self.x * o.z,
-            z: self.x * o.y - self.y * o.x,
-        }
+        V { x: self.y * o.z - self.z * o.y, y: self.z * o.x - self.x * o.z, z: self.x * o.y - self.y * o.x }
     }
 
     #[inline]
     pub fn scale(self, k: D) -> V {
-        V {
-            x: self.x * k,
-            y: self.y * k,
-            z: self.z * k,
-        }
+        V { x: self.x * k, y: self.y * k, z: self.z * k }
     }
 
     #[inline]
@@ -207,11 +189,7 @@ impl Add for V {
     type Output = V;
     #[inline]
     fn add(self, o: V) -> V {
-        V {
-            x: self.x + o.x,
-            y: self.y + o.y,
-            z: self.z + o.z,
-        }
+        V { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
     }
 }
 
@@ -219,11 +197,7 @@ impl Sub for V {
     type Output = V;
     #[inline]
     fn sub(self, o: V) -> V {
-        V {
-            x: self.x - o.x,
-            y: self.y - o.y,
-            z: self.z - o.z,
-        }
+        V { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
     }
 }
 
@@ -231,10 +205,6 @@ impl Neg for V {
     type Output = V;
     #[inline]
     fn neg(self) -> V {
-        V {
-            x: -self.x,
-            y: -self.y,
-            z: -self.z,
-        }
+        V { x: -self.x, y: -self.y, z: -self.z }
     }
 }

@@ -21,11 +21,7 @@ pub fn stretch(e: DVec3, rest_len: f64, ea: f64, project: bool) -> (f64, DVec3, 
     let energy = 0.5 * ea * s * s * rest_len;
     let grad = ea * s * t;
     let a = ea / rest_len;
-    let b = if project {
-        ea * s.max(0.0) / len
-    } else {
-        ea * s / len
-    };
+    let b = if project { ea * s.max(0.0) / len } else { ea * s / len };
     let mut h = [[0.0; 3]; 3];
     let tv = t.to_array();
     for (r, row) in h.iter_mut().enumerate() {
@@ -197,16 +193,8 @@ fn curvature_gradients(inp: &BendTwistInput) -> ([f64; 4], [[f64; NV]; 4], [f64;
         let w1 = kb.dot(m2);
         let w2 = -kb.dot(m1);
         let rows = [
-            (
-                (tf.cross(d2t) - w1 * tt) / ne,
-                (-te.cross(d2t) - w1 * tt) / nf,
-                -kb.dot(m1),
-            ),
-            (
-                (-tf.cross(d1t) - w2 * tt) / ne,
-                (te.cross(d1t) - w2 * tt) / nf,
-                -kb.dot(m2),
-            ),
+            ((tf.cross(d2t) - w1 * tt) / ne, (-te.cross(d2t) - w1 * tt) / nf, -kb.dot(m1)),
+            ((-tf.cross(d1t) - w2 * tt) / ne, (te.cross(d1t) - w2 * tt) / nf, -kb.dot(m2)),
         ];
         for (a, (de, df, dth)) in rows.into_iter().enumerate() {
             let k = 2 * j + a;
@@ -232,10 +220,7 @@ pub fn bend_twist_gradient(inp: &BendTwistInput) -> (f64, [f64; NV]) {
 /// Energy, gradient and, when asked, the Gauss-Newton Hessian of the stencil:
 /// `EI/(2 l) sum_a grad omega_a grad omega_a^T + GJ/l grad m grad m^T`, positive semidefinite.
 /// The solver falls back to it where the exact Hessian is indefinite (sharp folds).
-pub fn bend_twist_gauss_newton(
-    inp: &BendTwistInput,
-    with_hessian: bool,
-) -> (f64, [f64; NV], [[f64; NV]; NV]) {
+pub fn bend_twist_gauss_newton(inp: &BendTwistInput, with_hessian: bool) -> (f64, [f64; NV], [[f64; NV]; NV]) {
     let (w, dw, dm) = curvature_gradients(inp);
     let kb2 = 0.5 * inp.bend_k;
     let mut energy = 0.0;
@@ -344,10 +329,7 @@ mod tests {
         let (e1, g1) = bend_twist_gradient(&base);
         assert!((e1 - e0).abs() < 1e-12);
         for k in 0..NV {
-            assert!(
-                (g1[k] - g[k]).abs() < 1e-12 * (1.0 + g[k].abs()),
-                "plain vs dual gradient {k}"
-            );
+            assert!((g1[k] - g[k]).abs() < 1e-12 * (1.0 + g[k].abs()), "plain vs dual gradient {k}");
         }
         let h = 1e-6;
         for k in 0..NV {
@@ -357,11 +339,7 @@ mod tests {
             dy[k] = -h;
             let em = bend_twist_sum(&moved(&base, &dy));
             let fd = (ep - em) / (2.0 * h);
-            assert!(
-                (fd - g[k]).abs() < 1e-6 * (1.0 + g[k].abs()),
-                "k={k} fd={fd} an={}",
-                g[k]
-            );
+            assert!((fd - g[k]).abs() < 1e-6 * (1.0 + g[k].abs()), "k={k} fd={fd} an={}", g[k]);
         }
     }
 
@@ -388,11 +366,7 @@ mod tests {
                 let f = |dy: &[f64; NV]| bend_twist_sum(&moved(&base, dy));
                 let fd = (f(&pp) - f(&pm) - f(&mp) + f(&mm)) / (4.0 * h * h);
                 let _ = e0;
-                assert!(
-                    (fd - hs[a][b]).abs() < 2e-5 * (1.0 + hs[a][b].abs()),
-                    "a={a} b={b} fd={fd} an={}",
-                    hs[a][b]
-                );
+                assert!((fd - hs[a][b]).abs() < 2e-5 * (1.0 + hs[a][b].abs()), "a={a} b={b} fd={fd} an={}", hs[a][b]);
             }
         }
     }
@@ -414,9 +388,7 @@ mod tests {
                     (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
                 })
                 .collect();
-            let q: f64 = (0..NV)
-                .map(|r| (0..NV).map(|c| v[r] * h[r][c] * v[c]).sum::<f64>())
-                .sum();
+            let q: f64 = (0..NV).map(|r| (0..NV).map(|c| v[r] * h[r][c] * v[c]).sum::<f64>()).sum();
             assert!(q >= -1e-12);
         }
     }

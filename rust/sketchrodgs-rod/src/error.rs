@@ -17,16 +17,14 @@ pub enum RodError {
         "edge {edge} (vertices {edge} and {next}) has length {length:.3e}, below {min_length:.3e}; merge coincident vertices first",
         next = edge + 1
     )]
-    DegenerateEdge {
-        edge: usize,
-        length: f64,
-        min_length: f64,
-    },
+    DegenerateEdge { edge: usize, length: f64, min_length: f64 },
     /// An edge longer than a float can hold (coordinates near the float range).
     #[error("edge {edge} has an infinite length: the coordinates are too large")]
     EdgeTooLong { edge: usize },
     /// A rotation given as a matrix that is not one.
-    #[error("rotation: not a rotation matrix (largest entry of R Rᵀ - I is {deviation:.3e}, det {determinant:.6}); give an orthonormal matrix with det 1")]
+    #[error(
+        "rotation: not a rotation matrix (largest entry of R Rᵀ - I is {deviation:.3e}, det {determinant:.6}); give an orthonormal matrix with det 1"
+    )]
     NotARotation { deviation: f64, determinant: f64 },
     /// A grab on a pinned or clamped vertex.
     #[error("vertex {vertex} is {}: set it free before grabbing it", if matches!(boundary, crate::Boundary::Pinned) { "pinned" } else { "clamped" })]
@@ -36,11 +34,7 @@ pub enum RodError {
     FoldedVertex { vertex: usize },
     /// A material or solver parameter is out of range.
     #[error("parameter `{name}` = {value} is invalid: {reason}")]
-    InvalidParameter {
-        name: &'static str,
-        value: f64,
-        reason: &'static str,
-    },
+    InvalidParameter { name: &'static str, value: f64, reason: &'static str },
     /// A vertex index past the end of the rod.
     #[error("vertex {vertex} is out of range for a rod of {len} vertices")]
     VertexOutOfRange { vertex: usize, len: usize },
@@ -61,9 +55,5 @@ pub enum RodError {
     InvalidTimeStep(f64),
     /// A state array of the wrong length.
     #[error("{what} has {got} entries, expected {expected}")]
-    LengthMismatch {
-        what: &'static str,
-        got: usize,
-        expected: usize,
-    },
+    LengthMismatch { what: &'static str, got: usize, expected: usize },
 }

@@ -48,11 +48,7 @@ impl RodParams {
             if value.is_finite() && value > 0.0 {
                 Ok(())
             } else {
-                Err(RodError::InvalidParameter {
-                    name,
-                    value,
-                    reason: "must be positive and finite",
-                })
+                Err(RodError::InvalidParameter { name, value, reason: "must be positive and finite" })
             }
         };
         positive("radius", self.radius)?;
@@ -77,11 +73,7 @@ impl RodParams {
             });
         }
         if let Some(&g) = self.gravity.iter().find(|g| !g.is_finite()) {
-            return Err(RodError::InvalidParameter {
-                name: "gravity",
-                value: g,
-                reason: "must be finite",
-            });
+            return Err(RodError::InvalidParameter { name: "gravity", value: g, reason: "must be finite" });
         }
         Ok(())
     }
@@ -103,8 +95,7 @@ impl RodParams {
 
     /// Shear modulus `G` (Pa), given or derived from `E` and `nu`.
     pub fn shear(&self) -> f64 {
-        self.shear_modulus
-            .unwrap_or(self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio)))
+        self.shear_modulus.unwrap_or(self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio)))
     }
 
     /// Stretching stiffness `EA` (N).
@@ -139,12 +130,7 @@ pub struct SolverSettings {
 
 impl Default for SolverSettings {
     fn default() -> Self {
-        Self {
-            tolerance: 1.0e-7,
-            max_iterations: 25,
-            max_halvings: 8,
-            max_static_iterations: 200,
-        }
+        Self { tolerance: 1.0e-7, max_iterations: 25, max_halvings: 8, max_static_iterations: 200 }
     }
 }
 

@@ -4,8 +4,8 @@ use crate::banded::BandedMatrix;
 use crate::dual::NV;
 use crate::energy::{self, BendTwistInput};
 use crate::frames::{
-    average_rotation, curvature_binormal, frame_matrix, material_frame, perpendicular,
-    signed_angle, transport, unwrap_near,
+    average_rotation, curvature_binormal, frame_matrix, material_frame, perpendicular, signed_angle, transport,
+    unwrap_near,
 };
 use crate::{RodError, RodParams, SolverSettings};
 use glam::{DMat3, DQuat, DVec3};
@@ -243,10 +243,7 @@ impl ElasticRod {
         }
         for (i, p) in polyline.iter().enumerate() {
             if p.iter().any(|c| !c.is_finite()) {
-                return Err(RodError::NonFiniteVertex {
-                    vertex: i,
-                    value: *p,
-                });
+                return Err(RodError::NonFiniteVertex { vertex: i, value: *p });
             }
         }
         let x: Vec<DVec3> = polyline.iter().map(|p| DVec3::from_array(*p)).collect();
@@ -258,11 +255,7 @@ impl ElasticRod {
         let min_length = MIN_EDGE_FRACTION * length.max(f64::MIN_POSITIVE);
         for (j, &l) in rest_len.iter().enumerate() {
             if l.is_nan() || l <= min_length {
-                return Err(RodError::DegenerateEdge {
-                    edge: j,
-                    length: l,
-                    min_length,
-                });
+                return Err(RodError::DegenerateEdge { edge: j, length: l, min_length });
             }
         }
         let tangent: Vec<DVec3> = x.windows(2).map(|w| (w[1] - w[0]).normalize()).collect();
@@ -278,11 +271,7 @@ impl ElasticRod {
             let a = transport(ref_dir[j - 1], tangent[j - 1], tangent[j]);
             ref_dir.push((a - tangent[j] * tangent[j].dot(a)).normalize());
         }
-        let rest_frames = ref_dir
-            .iter()
-            .zip(&tangent)
-            .map(|(a, t)| frame_matrix(*a, t.cross(*a), *t))
-            .collect();
+        let rest_frames = ref_dir.iter().zip(&tangent).map(|(a, t)| frame_matrix(*a, t.cross(*a), *t)).collect();
         let mut voronoi_len = vec![0.0; n];
         for i in 1..n - 1 {
             voronoi_len[i] = 0.5 * (rest_len[i - 1] + rest_len[i]);
@@ -294,10 +283,7 @@ impl ElasticRod {
             mass[j + 1] += 0.5 * rho_a * l;
         }
         // Twist inertia of an edge: rho J l = m r^2 / 2.
-        let twist_inertia: Vec<f64> = rest_len
-            .iter()
-            .map(|&l| params.density * params.polar_moment() * l)
-            .collect();
+        let twist_inertia: Vec<f64> = rest_len.iter().map(|&l| params.density * params.polar_moment() * l).collect();
         let state = State {
             x: x.clone(),
             v: vec![DVec3::ZERO; n],
@@ -404,23 +390,14 @@ impl ElasticRod {
         let gj = self.params.twist_stiffness();
         (0..n)
             .map(|i| {
-                if i == 0 || i == n - 1 {
-                    0.0
-                } else {
-                    gj * (geo.twist[i] - self.rest_twist[i]) / self.voronoi_len[i]
-                }
+                if i == 0 || i == n - 1 { 0.0 } else { gj * (geo.twist[i] - self.rest_twist[i]) / self.voronoi_len[i] }
             })
             .collect()
     }
 
     /// Stretch `|e| / |e_rest| - 1` of each edge.
     pub fn edge_strain(&self) -> Vec<f64> {
-        self.state
-            .x
-            .windows(2)
-            .zip(&self.rest_len)
-            .map(|(w, &l)| (w[1] - w[0]).length() / l - 1.0)
-            .collect()
+        self.state.x.windows(2).zip(&self.rest_len).map(|(w, &l)| (w[1] - w[0]).length() / l - 1.0).collect()
     }
 
     /// Boundary condition of every vertex.
@@ -435,11 +412,7 @@ impl ElasticRod {
 
     fn check_vertex(&self, vertex: usize) -> Result<(), RodError> {
         let len = self.num_vertices();
-        if vertex < len {
-            Ok(())
-        } else {
-            Err(RodError::VertexOutOfRange { vertex, len })
-        }
+        if vertex < len { Ok(()) } else { Err(RodError::VertexOutOfRange { vertex, len }) }
     }
 
     /// Sets the boundary condition of `vertex`, anchored at its current position and frame.
@@ -467,10 +440,7 @@ impl ElasticRod {
         let frame = vertex_rotation(&now, vertex);
         let mut halves = Vec::with_capacity(2);
         let mut twist_now = [0.0; 2];
-        let sides = [
-            (vertex > 0, vertex.wrapping_sub(1), true),
-            (vertex + 1 < n, vertex, false),
-        ];
+        let sides = [(vertex > 0, vertex.wrapping_sub(1), true), (vertex + 1 < n, vertex, false)];
         for (present, edge, ghost_after) in sides {
             if !present {
                 continue;
@@ -478,18 +448,12 @@ impl ElasticRod {
             // Natural curvature and twist of the half stencil, from the rest shape.
             let rest_edge = self.rest_frames[edge];
             let ev = self.rest_x[edge + 1] - self.rest_x[edge];
-            let mut half = Half {
-                edge,
-                ghost_after,
-                rest_kappa: [0.0; 4],
-                rest_twist: 0.0,
-            };
+            let mut half = Half { edge, ghost_after, rest_kappa: [0.0; 4], rest_twist: 0.0 };
             let rest = half_stencil(&half, ev, rest_edge, rest_vertex_frame, 0.0);
             half.rest_kappa = energy::material_curvature(rest.e, rest.f, rest.me, rest.mf);
             half.rest_twist = rest.twist;
             let ev_now = self.state.x[edge + 1] - self.state.x[edge];
-            twist_now[halves.len()] =
-                half_stencil(&half, ev_now, now[edge], frame, half.rest_twist).twist;
+            twist_now[halves.len()] = half_stencil(&half, ev_now, now[edge], frame, half.rest_twist).twist;
             halves.push(half);
         }
         self.clamps.push(Clamp {
@@ -539,11 +503,7 @@ impl ElasticRod {
         self.check_vertex(vertex)?;
         let r = finite_rotation(rotation)?;
         let t = finite_point("clamp translation", translation)?;
-        let clamp = self
-            .clamps
-            .iter_mut()
-            .find(|c| c.vertex == vertex)
-            .ok_or(RodError::NotClamped(vertex))?;
+        let clamp = self.clamps.iter_mut().find(|c| c.vertex == vertex).ok_or(RodError::NotClamped(vertex))?;
         clamp.rotation = r;
         clamp.translation = t;
         Ok(())
@@ -551,11 +511,7 @@ impl ElasticRod {
 
     /// Twisting moment the rod exerts on the clamp of `vertex` about the clamp's tangent (N m).
     pub fn clamp_torque(&self, vertex: usize) -> Result<f64, RodError> {
-        let k = self
-            .clamps
-            .iter()
-            .position(|c| c.vertex == vertex)
-            .ok_or(RodError::NotClamped(vertex))?;
+        let k = self.clamps.iter().position(|c| c.vertex == vertex).ok_or(RodError::NotClamped(vertex))?;
         let mut geo = Geometry::default();
         if !self.geometry(&self.state.x, &self.state.theta, &mut geo) {
             return Ok(f64::NAN);
@@ -601,11 +557,7 @@ impl ElasticRod {
     /// Moves the whole rod rigidly (state, pins, clamps, grab target): `x -> R x + t`
     /// (`rotation` row-major), velocities and frames rotated. The elastic energy is unchanged.
     /// Clamps keep their current pose moved along; later `move_clamp` calls are relative to it.
-    pub fn transform(
-        &mut self,
-        rotation: [[f64; 3]; 3],
-        translation: [f64; 3],
-    ) -> Result<(), RodError> {
+    pub fn transform(&mut self, rotation: [[f64; 3]; 3], translation: [f64; 3]) -> Result<(), RodError> {
         let r = finite_rotation(rotation)?;
         let t = finite_point("translation", translation)?;
         let s = &mut self.state;
@@ -631,30 +583,19 @@ impl ElasticRod {
     pub fn set_positions(&mut self, positions: &[[f64; 3]]) -> Result<(), RodError> {
         let n = self.num_vertices();
         if positions.len() != n {
-            return Err(RodError::LengthMismatch {
-                what: "positions",
-                got: positions.len(),
-                expected: n,
-            });
+            return Err(RodError::LengthMismatch { what: "positions", got: positions.len(), expected: n });
         }
         let x: Vec<DVec3> = positions.iter().map(|p| DVec3::from_array(*p)).collect();
         for (i, p) in x.iter().enumerate() {
             if !p.is_finite() {
-                return Err(RodError::NonFiniteVertex {
-                    vertex: i,
-                    value: p.to_array(),
-                });
+                return Err(RodError::NonFiniteVertex { vertex: i, value: p.to_array() });
             }
         }
         for j in 0..n - 1 {
             let l = (x[j + 1] - x[j]).length();
             let min_length = MIN_DEFORMED_EDGE * self.rest_len[j];
             if l.is_nan() || l <= min_length {
-                return Err(RodError::DegenerateEdge {
-                    edge: j,
-                    length: l,
-                    min_length,
-                });
+                return Err(RodError::DegenerateEdge { edge: j, length: l, min_length });
             }
         }
         self.state.x = x;
@@ -668,17 +609,10 @@ impl ElasticRod {
     pub fn set_velocities(&mut self, velocities: &[[f64; 3]]) -> Result<(), RodError> {
         let n = self.num_vertices();
         if velocities.len() != n {
-            return Err(RodError::LengthMismatch {
-                what: "velocities",
-                got: velocities.len(),
-                expected: n,
-            });
+            return Err(RodError::LengthMismatch { what: "velocities", got: velocities.len(), expected: n });
         }
         if let Some(v) = velocities.iter().find(|v| v.iter().any(|c| !c.is_finite())) {
-            return Err(RodError::NonFiniteInput {
-                what: "velocity",
-                value: v.to_vec(),
-            });
+            return Err(RodError::NonFiniteInput { what: "velocity", value: v.to_vec() });
         }
         self.state.v = velocities.iter().map(|v| DVec3::from_array(*v)).collect();
         Ok(())
@@ -699,25 +633,17 @@ impl ElasticRod {
     /// Per-vertex frames: the average of the adjacent edges' frames (one edge at the ends).
     pub fn vertex_frames(&self) -> Vec<DMat3> {
         let e = self.edge_frames();
-        (0..self.num_vertices())
-            .map(|i| vertex_rotation(&e, i))
-            .collect()
+        (0..self.num_vertices()).map(|i| vertex_rotation(&e, i)).collect()
     }
 
     /// Edge frames as unit quaternions.
     pub fn edge_quats(&self) -> Vec<DQuat> {
-        self.edge_frames()
-            .iter()
-            .map(|m| DQuat::from_mat3(m).normalize())
-            .collect()
+        self.edge_frames().iter().map(|m| DQuat::from_mat3(m).normalize()).collect()
     }
 
     /// Vertex frames as unit quaternions.
     pub fn vertex_quats(&self) -> Vec<DQuat> {
-        self.vertex_frames()
-            .iter()
-            .map(|m| DQuat::from_mat3(m).normalize())
-            .collect()
+        self.vertex_frames().iter().map(|m| DQuat::from_mat3(m).normalize()).collect()
     }
 
     /// Energy of the current state.
@@ -757,13 +683,7 @@ impl ElasticRod {
         self.geo = geo;
         self.state.x = x;
         let f = (0..n)
-            .map(|i| {
-                -DVec3::new(
-                    self.grad[dof_x(i)],
-                    self.grad[dof_x(i) + 1],
-                    self.grad[dof_x(i) + 2],
-                )
-            })
+            .map(|i| -DVec3::new(self.grad[dof_x(i)], self.grad[dof_x(i) + 1], self.grad[dof_x(i) + 2]))
             .collect();
         let tq = (0..n - 1).map(|j| -self.grad[dof_theta(j)]).collect();
         (f, tq)
@@ -845,14 +765,7 @@ impl ElasticRod {
 
     /// Half stencil `h` of clamp `k`: bending/twisting between the clamp frame and the edge,
     /// over half the edge's rest length.
-    fn half_input(
-        &self,
-        x: &[DVec3],
-        geo: &Geometry,
-        k: usize,
-        h: usize,
-        half: &Half,
-    ) -> BendTwistInput {
+    fn half_input(&self, x: &[DVec3], geo: &Geometry, k: usize, h: usize, half: &Half) -> BendTwistInput {
         let j = half.edge;
         let edge = frame_matrix(geo.m1[j], geo.m2[j], geo.t[j]);
         let mut inp = half_stencil(half, x[j + 1] - x[j], edge, self.state.clamp_frame[k], 0.0);
@@ -909,13 +822,7 @@ impl ElasticRod {
     }
 
     /// The potential Newton minimises: elastic + gravity (+ backward-Euler inertia and damping).
-    fn potential(
-        &self,
-        x: &[DVec3],
-        theta: &[f64],
-        inertia: Option<&Inertia>,
-        geo: &mut Geometry,
-    ) -> f64 {
+    fn potential(&self, x: &[DVec3], theta: &[f64], inertia: Option<&Inertia>, geo: &mut Geometry) -> f64 {
         if !self.geometry(x, theta, geo) {
             return f64::INFINITY;
         }
@@ -931,8 +838,7 @@ impl ElasticRod {
             for i in 0..x.len() {
                 phi += self.mass[i]
                     * k
-                    * ((x[i] - inr.x_hat[i]).length_squared()
-                        + c * (x[i] - inr.x_n[i]).length_squared());
+                    * ((x[i] - inr.x_hat[i]).length_squared() + c * (x[i] - inr.x_n[i]).length_squared());
             }
             for j in 0..theta.len() {
                 let a = theta[j] - inr.th_hat[j];
@@ -987,11 +893,7 @@ impl ElasticRod {
                 let half = self.clamps[k].halves[h];
                 let inp = self.half_input(x, geo, k, h, &half);
                 let (gy, hy) = stencil_derivatives(&inp, hessian);
-                let map = if half.ghost_after {
-                    &HALF_MAP_E
-                } else {
-                    &HALF_MAP_F
-                };
+                let map = if half.ghost_after { &HALF_MAP_E } else { &HALF_MAP_F };
                 self.dtheta_elastic[half.edge] += if half.ghost_after { gy[6] } else { gy[7] };
                 self.scatter(dof_x(half.edge), map, &gy, &hy, with_hessian);
             }
@@ -1016,13 +918,7 @@ impl ElasticRod {
     /// Adds a full bending stencil's gradient and Hessian (in `y = (e, f, theta_e, theta_f)`)
     /// to its 11 consecutive unknowns from `base`: `x_{i-1}, theta_{i-1}, x_i, theta_i,
     /// x_{i+1}`, with `e = x_i - x_{i-1}` and `f = x_{i+1} - x_i` (block form of `P^T H P`).
-    fn scatter_stencil(
-        &mut self,
-        base: usize,
-        gy: &[f64; NV],
-        hy: &[[f64; NV]; NV],
-        with_hessian: bool,
-    ) {
+    fn scatter_stencil(&mut self, base: usize, gy: &[f64; NV], hy: &[[f64; NV]; NV], with_hessian: bool) {
         for r in 0..3 {
             self.grad[base + r] -= gy[r];
             self.grad[base + 4 + r] += gy[r] - gy[3 + r];
@@ -1100,10 +996,7 @@ impl ElasticRod {
 
     /// Prescribed positions and clamp frames at the end of the next step.
     fn targets(&self) -> Targets {
-        let mut t = Targets {
-            x: self.pins.clone(),
-            frames: Vec::with_capacity(self.clamps.len()),
-        };
+        let mut t = Targets { x: self.pins.clone(), frames: Vec::with_capacity(self.clamps.len()) };
         for c in &self.clamps {
             t.x[c.vertex] = Some(c.anchor_x + c.translation);
             t.frames.push(c.rotation * c.anchor_frame);
@@ -1117,12 +1010,7 @@ impl ElasticRod {
     /// Targets halfway between the current state and `end`.
     fn midpoint(&self, end: &Targets) -> Targets {
         let s = &self.state;
-        let x = end
-            .x
-            .iter()
-            .enumerate()
-            .map(|(i, p)| p.map(|p| 0.5 * (s.x[i] + p)))
-            .collect();
+        let x = end.x.iter().enumerate().map(|(i, p)| p.map(|p| 0.5 * (s.x[i] + p))).collect();
         let frames = end
             .frames
             .iter()
@@ -1150,13 +1038,7 @@ impl ElasticRod {
         Ok(self.advance(dt, &end, 0, settings))
     }
 
-    fn advance(
-        &mut self,
-        h: f64,
-        end: &Targets,
-        depth: u32,
-        settings: &SolverSettings,
-    ) -> StepReport {
+    fn advance(&mut self, h: f64, end: &Targets, depth: u32, settings: &SolverSettings) -> StepReport {
         let saved = self.state.clone();
         let solve = self.solve(Some(h), end, settings.max_iterations, settings.tolerance);
         if solve.converged || (depth >= settings.max_halvings && solve.finite) {
@@ -1173,12 +1055,7 @@ impl ElasticRod {
             // Not even a finite start: keep the state, stop the motion, report it.
             self.state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
             self.state.omega.iter_mut().for_each(|w| *w = 0.0);
-            return StepReport {
-                substeps: 1,
-                newton_iterations: solve.iterations,
-                rejected: 1,
-                converged: false,
-            };
+            return StepReport { substeps: 1, newton_iterations: solve.iterations, rejected: 1, converged: false };
         }
         let mid = self.midpoint(end);
         let first = self.advance(0.5 * h, &mid, depth + 1, settings);
@@ -1225,11 +1102,7 @@ impl ElasticRod {
         self.state.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
         self.state.omega.iter_mut().for_each(|w| *w = 0.0);
         let e = self.energy();
-        Ok(StaticReport {
-            iterations,
-            converged,
-            energy: e.elastic() + e.gravity,
-        })
+        Ok(StaticReport { iterations, converged, energy: e.elastic() + e.gravity })
     }
 
     fn start_is_finite(&mut self, t: &Targets) -> bool {
@@ -1290,9 +1163,7 @@ impl ElasticRod {
         let mut fixed = vec![false; ndof];
         for (i, p) in end.x.iter().enumerate() {
             if p.is_some() {
-                fixed[dof_x(i)..dof_x(i) + 3]
-                    .iter_mut()
-                    .for_each(|f| *f = true);
+                fixed[dof_x(i)..dof_x(i) + 3].iter_mut().for_each(|f| *f = true);
             }
         }
         self.state.clamp_frame.clone_from(&end.frames);
@@ -1302,12 +1173,7 @@ impl ElasticRod {
                 h,
                 alpha: self.params.damping,
                 x_hat: s.x.iter().zip(&s.v).map(|(x, v)| *x + h * *v).collect(),
-                th_hat: s
-                    .theta
-                    .iter()
-                    .zip(&s.omega)
-                    .map(|(t, w)| t + h * w)
-                    .collect(),
+                th_hat: s.theta.iter().zip(&s.omega).map(|(t, w)| t + h * w).collect(),
                 x_n: s.x.clone(),
                 th_n: s.theta.clone(),
             }
@@ -1319,11 +1185,7 @@ impl ElasticRod {
         // its neighbouring edges.
         let mut trial = std::mem::take(&mut self.trial);
         let mut best: Option<(f64, Vec<DVec3>, Vec<f64>)> = None;
-        let moved = end
-            .x
-            .iter()
-            .zip(&self.state.x)
-            .any(|(p, x)| p.is_some_and(|p| p != *x));
+        let moved = end.x.iter().zip(&self.state.x).any(|(p, x)| p.is_some_and(|p| p != *x));
         let mut starts = Vec::with_capacity(3);
         if let Some(inr) = &inertia {
             starts.push((inr.x_hat.clone(), inr.th_hat.clone()));
@@ -1341,11 +1203,7 @@ impl ElasticRod {
         }
         let Some((mut phi, mut x, mut th)) = best else {
             self.trial = trial;
-            return Solve {
-                iterations: 0,
-                converged: false,
-                finite: false,
-            };
+            return Solve { iterations: 0, converged: false, finite: false };
         };
 
         let mut iterations = 0;
@@ -1369,14 +1227,7 @@ impl ElasticRod {
                 // Gauss-Newton one, then growing diagonal shifts.
                 self.assemble_system(&x, &th, &geo, inertia.as_ref(), &fixed, Hessian::Exact);
                 if !self.newton_direction(&mut dir, false) {
-                    self.assemble_system(
-                        &x,
-                        &th,
-                        &geo,
-                        inertia.as_ref(),
-                        &fixed,
-                        Hessian::GaussNewton,
-                    );
+                    self.assemble_system(&x, &th, &geo, inertia.as_ref(), &fixed, Hessian::GaussNewton);
                     if !self.newton_direction(&mut dir, true) {
                         break;
                     }
@@ -1418,8 +1269,7 @@ impl ElasticRod {
             }
             for _ in 0..MAX_BACKTRACKS {
                 for i in 0..n {
-                    x_try[i] = x[i]
-                        + alpha * DVec3::new(dir[dof_x(i)], dir[dof_x(i) + 1], dir[dof_x(i) + 2]);
+                    x_try[i] = x[i] + alpha * DVec3::new(dir[dof_x(i)], dir[dof_x(i) + 1], dir[dof_x(i) + 2]);
                 }
                 for j in 0..n - 1 {
                     th_try[j] = th[j] + alpha * dir[dof_theta(j)];
@@ -1444,23 +1294,14 @@ impl ElasticRod {
                 reuse = false;
                 continue;
             }
-            reuse = alpha == 1.0
-                && if fresh {
-                    size < CHORD_AFTER
-                } else {
-                    size < CHORD_CONTRACTION * last_size
-                };
+            reuse = alpha == 1.0 && if fresh { size < CHORD_AFTER } else { size < CHORD_CONTRACTION * last_size };
             last_size = size;
         }
         self.geo = geo;
         self.trial = trial;
         self.state.x = x;
         self.state.theta = th;
-        Solve {
-            iterations,
-            converged,
-            finite: true,
-        }
+        Solve { iterations, converged, finite: true }
     }
 
     /// Gradient (and Hessian as asked) of the potential at `(x, th)` into the workspace, with
@@ -1495,19 +1336,15 @@ impl ElasticRod {
                 for r in 0..3 {
                     self.grad[dof_x(i) + r] += g[r];
                     if with_hessian {
-                        self.hess
-                            .add_diag(dof_x(i) + r, self.mass[i] * k * (1.0 + c));
+                        self.hess.add_diag(dof_x(i) + r, self.mass[i] * k * (1.0 + c));
                     }
                 }
             }
             for j in 0..n - 1 {
-                let g = self.twist_inertia[j]
-                    * k
-                    * ((th[j] - inr.th_hat[j]) + c * (th[j] - inr.th_n[j]));
+                let g = self.twist_inertia[j] * k * ((th[j] - inr.th_hat[j]) + c * (th[j] - inr.th_n[j]));
                 self.grad[dof_theta(j)] += g;
                 if with_hessian {
-                    self.hess
-                        .add_diag(dof_theta(j), self.twist_inertia[j] * k * (1.0 + c));
+                    self.hess.add_diag(dof_theta(j), self.twist_inertia[j] * k * (1.0 + c));
                 }
             }
         }
@@ -1525,9 +1362,7 @@ impl ElasticRod {
     /// shift until the factorisation is positive definite; without, fails if it is not.
     fn newton_direction(&mut self, dir: &mut [f64], shift: bool) -> bool {
         let ndof = dir.len();
-        let max_diag = (0..ndof)
-            .map(|i| self.hess.diag(i).abs())
-            .fold(0.0, f64::max);
+        let max_diag = (0..ndof).map(|i| self.hess.diag(i).abs()).fold(0.0, f64::max);
         let floor = 1.0e-12 * max_diag.max(f64::MIN_POSITIVE);
         let mut mu = 0.0;
         for _ in 0..if shift { 12 } else { 1 } {
@@ -1568,10 +1403,7 @@ impl ElasticRod {
                     match (left, known.get(k).copied()) {
                         (Some(a), Some(b)) => {
                             let w = (i - a) as f64 / (b - a) as f64;
-                            Some(
-                                disp[a].unwrap_or_default() * (1.0 - w)
-                                    + disp[b].unwrap_or_default() * w,
-                            )
+                            Some(disp[a].unwrap_or_default() * (1.0 - w) + disp[b].unwrap_or_default() * w)
                         }
                         (Some(a), None) => disp[a],
                         (None, Some(b)) => disp[b],
@@ -1639,11 +1471,7 @@ const HALF_MAP_F: [[Option<(usize, f64)>; 2]; 7] = [
 /// rest values are left zero.
 fn half_stencil(half: &Half, ev: DVec3, edge: DMat3, clamp: DMat3, near: f64) -> BendTwistInput {
     let gv = clamp.z_axis * ev.length();
-    let (first, second) = if half.ghost_after {
-        (edge, clamp)
-    } else {
-        (clamp, edge)
-    };
+    let (first, second) = if half.ghost_after { (edge, clamp) } else { (clamp, edge) };
     let (e, f) = if half.ghost_after { (ev, gv) } else { (gv, ev) };
     let p = transport(first.x_axis, first.z_axis, second.z_axis);
     let twist = unwrap_near(signed_angle(p, second.x_axis, second.z_axis), near);
@@ -1686,10 +1514,7 @@ fn finite_point(what: &'static str, p: [f64; 3]) -> Result<DVec3, RodError> {
     if p.iter().all(|c| c.is_finite()) {
         Ok(DVec3::from_array(p))
     } else {
-        Err(RodError::NonFiniteInput {
-            what,
-            value: p.to_vec(),
-        })
+        Err(RodError::NonFiniteInput { what, value: p.to_vec() })
     }
 }
 
@@ -1697,10 +1522,7 @@ fn finite_point(what: &'static str, p: [f64; 3]) -> Result<DVec3, RodError> {
 fn finite_rotation(r: [[f64; 3]; 3]) -> Result<DMat3, RodError> {
     let flat: Vec<f64> = r.iter().flatten().copied().collect();
     if flat.iter().any(|c| !c.is_finite()) {
-        return Err(RodError::NonFiniteInput {
-            what: "rotation",
-            value: flat,
-        });
+        return Err(RodError::NonFiniteInput { what: "rotation", value: flat });
     }
     let m = DMat3::from_cols_array_2d(&r).transpose();
     let off = (m * m.transpose() - DMat3::IDENTITY).to_cols_array();
@@ -1716,7 +1538,6 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
     use super::*;
     use crate::test_rng::lcg;
-
 
     /// A curved, twisted test rod with gravity, perturbed away from rest.
     fn test_rod(seed: &mut u64) -> ElasticRod {
@@ -1769,9 +1590,7 @@ mod tests {
 
     fn unpack(rod: &ElasticRod, q: &[f64]) -> (Vec<DVec3>, Vec<f64>) {
         let n = rod.num_vertices();
-        let x = (0..n)
-            .map(|i| DVec3::new(q[dof_x(i)], q[dof_x(i) + 1], q[dof_x(i) + 2]))
-            .collect();
+        let x = (0..n).map(|i| DVec3::new(q[dof_x(i)], q[dof_x(i) + 1], q[dof_x(i) + 2])).collect();
         let th = (0..n - 1).map(|j| q[dof_theta(j)]).collect();
         (x, th)
     }
@@ -1801,18 +1620,15 @@ mod tests {
         let k = 1.0 / (inr.h * inr.h);
         let c = inr.alpha * inr.h;
         for i in 0..n {
-            let gi = rod.mass[i] * k * ((x[i] - inr.x_hat[i]) + c * (x[i] - inr.x_n[i]))
-                - rod.mass[i] * g;
+            let gi = rod.mass[i] * k * ((x[i] - inr.x_hat[i]) + c * (x[i] - inr.x_n[i])) - rod.mass[i] * g;
             for r in 0..3 {
                 rod.grad[dof_x(i) + r] += gi[r];
                 rod.hess.add_diag(dof_x(i) + r, rod.mass[i] * k * (1.0 + c));
             }
         }
         for j in 0..n - 1 {
-            rod.grad[dof_theta(j)] +=
-                rod.twist_inertia[j] * k * ((th[j] - inr.th_hat[j]) + c * (th[j] - inr.th_n[j]));
-            rod.hess
-                .add_diag(dof_theta(j), rod.twist_inertia[j] * k * (1.0 + c));
+            rod.grad[dof_theta(j)] += rod.twist_inertia[j] * k * ((th[j] - inr.th_hat[j]) + c * (th[j] - inr.th_n[j]));
+            rod.hess.add_diag(dof_theta(j), rod.twist_inertia[j] * k * (1.0 + c));
         }
         (rod.grad.clone(), rod.hess.clone())
     }
@@ -1840,11 +1656,7 @@ mod tests {
                 let mut qm = q.clone();
                 qm[d] -= h;
                 let fd = (phi(&rod, &qp, &inr) - phi(&rod, &qm, &inr)) / (2.0 * h);
-                assert!(
-                    (fd - g[d]).abs() < 1e-5 * (1.0 + g[d].abs()),
-                    "dof {d}: fd {fd} vs {}",
-                    g[d]
-                );
+                assert!((fd - g[d]).abs() < 1e-5 * (1.0 + g[d].abs()), "dof {d}: fd {fd} vs {}", g[d]);
             }
         }
     }
@@ -1868,10 +1680,7 @@ mod tests {
             let fd = (at(h, h) - at(h, -h) - at(-h, h) + at(-h, -h)) / (4.0 * h * h);
             let hw = hm.mul_vec(&w);
             let an: f64 = u.iter().zip(&hw).map(|(a, b)| a * b).sum();
-            assert!(
-                (fd - an).abs() < 1e-4 * (1.0 + an.abs()),
-                "u^T H w: fd {fd} vs {an}"
-            );
+            assert!((fd - an).abs() < 1e-4 * (1.0 + an.abs()), "u^T H w: fd {fd} vs {an}");
         }
     }
 }

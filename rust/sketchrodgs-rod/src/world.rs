@@ -38,11 +38,7 @@ impl World {
 
     fn check(&self, index: usize) -> Result<(), RodError> {
         let len = self.rods.len();
-        if index < len {
-            Ok(())
-        } else {
-            Err(RodError::RodOutOfRange { rod: index, len })
-        }
+        if index < len { Ok(()) } else { Err(RodError::RodOutOfRange { rod: index, len }) }
     }
 
     /// Rod `index`.
@@ -65,21 +61,12 @@ impl World {
     /// Advances every rod by `dt` seconds; one report per rod, in order.
     pub fn step(&mut self, dt: f64) -> Result<Vec<StepReport>, RodError> {
         let settings = self.settings;
-        self.rods
-            .iter_mut()
-            .map(|r| r.step(dt, &settings))
-            .collect()
+        self.rods.iter_mut().map(|r| r.step(dt, &settings)).collect()
     }
 
     /// Advances every rod by `dt`, `count` times; reports summed per rod.
     pub fn step_many(&mut self, dt: f64, count: usize) -> Result<Vec<StepReport>, RodError> {
-        let mut total: Vec<StepReport> = vec![
-            StepReport {
-                converged: true,
-                ..StepReport::default()
-            };
-            self.rods.len()
-        ];
+        let mut total: Vec<StepReport> = vec![StepReport { converged: true, ..StepReport::default() }; self.rods.len()];
         for _ in 0..count {
             for (t, r) in total.iter_mut().zip(self.step(dt)?) {
                 t.substeps += r.substeps;

@@ -6,9 +6,7 @@ use sketchrodgs_rod::{Boundary, DVec3, ElasticRod, RodError, RodParams, SolverSe
 const DT: f64 = 1.0 / 60.0;
 
 fn straight(n: usize, length: f64) -> Vec<[f64; 3]> {
-    (0..n)
-        .map(|i| [length * i as f64 / (n - 1) as f64, 0.0, 0.0])
-        .collect()
+    (0..n).map(|i| [length * i as f64 / (n - 1) as f64, 0.0, 0.0]).collect()
 }
 
 /// A curved, non-planar rest shape (a helix arc).
@@ -30,19 +28,11 @@ fn rot_x(a: f64) -> [[f64; 3]; 3] {
 fn rotation(axis: [f64; 3], a: f64) -> [[f64; 3]; 3] {
     let m = sketchrodgs_rod::DMat3::from_axis_angle(DVec3::from_array(axis).normalize(), a);
     let c = m.to_cols_array_2d();
-    [
-        [c[0][0], c[1][0], c[2][0]],
-        [c[0][1], c[1][1], c[2][1]],
-        [c[0][2], c[1][2], c[2][2]],
-    ]
+    [[c[0][0], c[1][0], c[2][0]], [c[0][1], c[1][1], c[2][1]], [c[0][2], c[1][2], c[2][2]]]
 }
 
 fn max_deviation(rod: &ElasticRod, reference: &[DVec3]) -> f64 {
-    rod.positions()
-        .iter()
-        .zip(reference)
-        .map(|(a, b)| (*a - *b).length())
-        .fold(0.0, f64::max)
+    rod.positions().iter().zip(reference).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max)
 }
 
 fn steel_cantilever(n: usize) -> ElasticRod {
@@ -64,33 +54,20 @@ fn cantilever_under_gravity_matches_euler_bernoulli() {
     let w = p.density * p.area() * 9.81;
     let expected = w / (8.0 * p.bend_stiffness()); // w L^4 / (8 E I), L = 1
     println!("cantilever: Euler-Bernoulli tip deflection {expected:.6e} m");
-    println!(
-        "{:>6} {:>14} {:>10} {:>6}",
-        "n", "tip [m]", "error", "iters"
-    );
+    println!("{:>6} {:>14} {:>10} {:>6}", "n", "tip [m]", "error", "iters");
     let mut errors = Vec::new();
     for n in [10, 25, 50, 100, 200] {
         let mut rod = steel_cantilever(n);
         let report = rod.solve_static(&SolverSettings::default()).unwrap();
         let tip = -rod.positions()[n - 1].z;
         let err = tip / expected - 1.0;
-        println!(
-            "{n:>6} {tip:>14.6e} {:>9.4}% {:>6}",
-            100.0 * err,
-            report.iterations
-        );
+        println!("{n:>6} {tip:>14.6e} {:>9.4}% {:>6}", 100.0 * err, report.iterations);
         assert!(report.converged);
-        assert!(
-            report.iterations < 50,
-            "a quasi-static solve takes tens of Newton iterations"
-        );
+        assert!(report.iterations < 50, "a quasi-static solve takes tens of Newton iterations");
         errors.push(err.abs());
     }
     assert!(errors[4] < 0.01, "n = 200 within 1 %: {}", errors[4]);
-    assert!(
-        errors.windows(2).all(|w| w[1] < w[0]),
-        "converges with n: {errors:?}"
-    );
+    assert!(errors.windows(2).all(|w| w[1] < w[0]), "converges with n: {errors:?}");
 }
 
 #[test]
@@ -128,9 +105,7 @@ fn twisted_clamped_rod_carries_uniform_twist_and_torque_gj_theta_over_l() {
         let expected = params.twist_stiffness() * theta / 1.0;
         let end = rod.clamp_torque(n - 1).unwrap();
         let start = rod.clamp_torque(0).unwrap();
-        println!(
-            "twist n={n}: end torque {end:.6e}, start {start:.6e}, GJ theta / L = {expected:.6e}"
-        );
+        println!("twist n={n}: end torque {end:.6e}, start {start:.6e}, GJ theta / L = {expected:.6e}");
         assert!((end.abs() / expected - 1.0).abs() < 0.01);
         assert!((start.abs() / expected - 1.0).abs() < 0.01);
         let moment = rod.twisting_moment();
@@ -148,9 +123,7 @@ fn rest_shape_is_an_equilibrium_and_rigid_motion_changes_nothing() {
     let mut rod = ElasticRod::new(&helix(40), RodParams::default()).unwrap();
     let scale = rod.params().stretch_stiffness();
     let (f, t) = rod.forces();
-    assert!(
-        f.iter().all(|v| v.length() < 1e-9 * scale) && t.iter().all(|v| v.abs() < 1e-9 * scale)
-    );
+    assert!(f.iter().all(|v| v.length() < 1e-9 * scale) && t.iter().all(|v| v.abs() < 1e-9 * scale));
     assert!(rod.energy().elastic() < 1e-18);
     for _ in 0..50 {
         rod.step(DT, &settings).unwrap();
@@ -158,13 +131,10 @@ fn rest_shape_is_an_equilibrium_and_rigid_motion_changes_nothing() {
     assert!(max_deviation(&rod, rod.rest_positions()) < 1e-12);
 
     // Rotate and move the whole rod: still no force, no energy, no motion.
-    rod.transform(rotation([0.3, -0.5, 0.8], 2.1), [1.0, -2.0, 0.5])
-        .unwrap();
+    rod.transform(rotation([0.3, -0.5, 0.8], 2.1), [1.0, -2.0, 0.5]).unwrap();
     let moved: Vec<DVec3> = rod.positions().to_vec();
     let (f, t) = rod.forces();
-    assert!(
-        f.iter().all(|v| v.length() < 1e-9 * scale) && t.iter().all(|v| v.abs() < 1e-9 * scale)
-    );
+    assert!(f.iter().all(|v| v.length() < 1e-9 * scale) && t.iter().all(|v| v.abs() < 1e-9 * scale));
     assert!(rod.energy().elastic() < 1e-18);
     rod.clamp(0).unwrap();
     rod.clamp(39).unwrap();
@@ -179,17 +149,12 @@ fn rest_shape_is_an_equilibrium_and_rigid_motion_changes_nothing() {
     let mut b = ElasticRod::new(&poly, RodParams::default()).unwrap();
     for r in [&mut a, &mut b] {
         r.clamp(0).unwrap();
-        r.grab(
-            20,
-            (r.positions()[20] + r.positions()[20].normalize() * 0.1).to_array(),
-        )
-        .unwrap();
+        r.grab(20, (r.positions()[20] + r.positions()[20].normalize() * 0.1).to_array()).unwrap();
     }
     // Same grab displacement, expressed in each rod's own placement.
     let rot = sketchrodgs_rod::DMat3::from_axis_angle(DVec3::new(0.3, -0.5, 0.8).normalize(), 2.1);
     let disp = a.grabbed().unwrap().1 - a.positions()[20];
-    b.grab(20, (b.positions()[20] + rot * disp).to_array())
-        .unwrap();
+    b.grab(20, (b.positions()[20] + rot * disp).to_array()).unwrap();
     a.step(DT, &settings).unwrap();
     b.step(DT, &settings).unwrap();
     let (ea, eb) = (a.energy().elastic(), b.energy().elastic());
@@ -224,18 +189,12 @@ fn pull_and_release(n: usize, amplitude: f64) -> (f64, f64, f64) {
         assert!(rod.positions().iter().all(|p| p.is_finite()));
         if frame == 60 {
             let s = rod.edge_strain();
-            held = (
-                s.iter().sum::<f64>() / s.len() as f64,
-                s.iter().cloned().fold(f64::MIN, f64::max),
-            );
+            held = (s.iter().sum::<f64>() / s.len() as f64, s.iter().cloned().fold(f64::MIN, f64::max));
         }
         if t > 1.0 {
             let e = rod.energy().total();
             if let Some(prev) = energy_after {
-                assert!(
-                    e <= prev * (1.0 + 1e-12),
-                    "energy grew after release at frame {frame}: {prev} -> {e}"
-                );
+                assert!(e <= prev * (1.0 + 1e-12), "energy grew after release at frame {frame}: {prev} -> {e}");
             }
             energy_after = Some(e);
             // The time from which the rod stays within 1e-3 L of rest.
@@ -253,15 +212,10 @@ fn pull_and_release(n: usize, amplitude: f64) -> (f64, f64, f64) {
 fn pull_and_release_like_the_app() {
     for n in [51, 201] {
         let (mean, max, rest) = pull_and_release(n, 0.3);
-        println!(
-            "pull n={n}: held mean strain {mean:.4}, max {max:.4}; back to rest in {rest:.2} s"
-        );
+        println!("pull n={n}: held mean strain {mean:.4}, max {max:.4}; back to rest in {rest:.2} s");
         // Between clamped ends the geometry forces 2 sqrt(0.5^2 + 0.3^2) - 1 = 16.6 % stretch.
         assert!((mean - 0.166).abs() < 0.01, "mean strain {mean}");
-        assert!(
-            max < 2.0 * mean,
-            "stretch spread along the rod: max {max}, mean {mean}"
-        );
+        assert!(max < 2.0 * mean, "stretch spread along the rod: max {max}, mean {mean}");
         assert!(rest < 5.0, "back to rest within 1e-3 L in {rest} s");
     }
 }
@@ -286,11 +240,7 @@ fn response_does_not_depend_on_vertex_count() {
             .collect::<Vec<_>>()
     };
     let (a, b) = (track(51), track(201));
-    let worst = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
+    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
     assert!(worst < 0.02 * 0.1, "mid-point paths differ by {worst}");
 }
 
@@ -335,22 +285,10 @@ fn extreme_input_never_panics_or_returns_nan() {
     // Zero-length edges are rejected with their index; folds too.
     let mut poly = straight(5, 1.0);
     poly[3] = poly[2];
-    assert!(matches!(
-        ElasticRod::new(&poly, RodParams::default()),
-        Err(RodError::DegenerateEdge { edge: 2, .. })
-    ));
+    assert!(matches!(ElasticRod::new(&poly, RodParams::default()), Err(RodError::DegenerateEdge { edge: 2, .. })));
     let fold = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]];
-    assert!(matches!(
-        ElasticRod::new(&fold, RodParams::default()),
-        Err(RodError::FoldedVertex { vertex: 1 })
-    ));
-    assert!(
-        ElasticRod::new(
-            &[[0.0, 0.0, f64::NAN], [1.0, 0.0, 0.0]],
-            RodParams::default()
-        )
-        .is_err()
-    );
+    assert!(matches!(ElasticRod::new(&fold, RodParams::default()), Err(RodError::FoldedVertex { vertex: 1 })));
+    assert!(ElasticRod::new(&[[0.0, 0.0, f64::NAN], [1.0, 0.0, 0.0]], RodParams::default()).is_err());
     assert!(ElasticRod::new(&[[0.0; 3]], RodParams::default()).is_err());
 
     // Coincident but not adjacent vertices (a closed loop) are fine.
@@ -386,10 +324,7 @@ fn extreme_input_never_panics_or_returns_nan() {
 #[test]
 fn a_step_that_does_not_converge_is_retried_in_substeps_and_reported() {
     // Four Newton iterations cannot resolve a 1 m jerk in one 0.1 s step; two halves can.
-    let settings = SolverSettings {
-        max_iterations: 4,
-        ..SolverSettings::default()
-    };
+    let settings = SolverSettings { max_iterations: 4, ..SolverSettings::default() };
     let mut rod = ElasticRod::new(&straight(30, 1.0), RodParams::default()).unwrap();
     rod.clamp(0).unwrap();
     rod.clamp(29).unwrap();
@@ -400,11 +335,7 @@ fn a_step_that_does_not_converge_is_retried_in_substeps_and_reported() {
     assert!((rod.positions()[15].y - 1.0).abs() < 1e-12);
     // With one iteration per attempt nothing converges: the finest substeps keep their best
     // finite iterate and say so.
-    let settings = SolverSettings {
-        max_iterations: 1,
-        max_halvings: 3,
-        ..SolverSettings::default()
-    };
+    let settings = SolverSettings { max_iterations: 1, max_halvings: 3, ..SolverSettings::default() };
     let r = rod.step(0.1, &settings).unwrap();
     assert!(!r.converged && r.substeps == 8, "{r:?}");
     assert!(rod.positions().iter().all(|p| p.is_finite()));
@@ -418,11 +349,7 @@ fn rods_in_one_world_step_together_as_if_alone() {
     alone.grab(29, [0.0, 0.0, 1.0]).unwrap();
     let mut world = World::new();
     let a = world.add(alone.clone());
-    let other = RodParams {
-        youngs_modulus: 1.0e6,
-        radius: 0.02,
-        ..RodParams::default()
-    };
+    let other = RodParams { youngs_modulus: 1.0e6, radius: 0.02, ..RodParams::default() };
     let b = world.add(ElasticRod::new(&straight(20, 0.5), other).unwrap());
     world.rod_mut(b).unwrap().pin(0).unwrap();
     world.rod_mut(b).unwrap().grab(19, [0.0, 0.5, 0.0]).unwrap();
@@ -433,10 +360,7 @@ fn rods_in_one_world_step_together_as_if_alone() {
     }
     assert_eq!(world.rod(a).unwrap().positions(), alone.positions());
     assert!((world.rod(b).unwrap().positions()[19] - DVec3::new(0.0, 0.5, 0.0)).length() < 1e-12);
-    assert!(matches!(
-        world.rod(2),
-        Err(RodError::RodOutOfRange { rod: 2, len: 2 })
-    ));
+    assert!(matches!(world.rod(2), Err(RodError::RodOutOfRange { rod: 2, len: 2 })));
 }
 
 #[test]
@@ -451,14 +375,10 @@ fn frames_are_rotations_and_follow_the_rod() {
     for (j, f) in rod.edge_frames().iter().enumerate() {
         assert!((f.determinant() - 1.0).abs() < 1e-12);
         assert!(
-            (*f * f.transpose() - sketchrodgs_rod::DMat3::IDENTITY)
-                .abs_diff_eq(sketchrodgs_rod::DMat3::ZERO, 1e-12)
+            (*f * f.transpose() - sketchrodgs_rod::DMat3::IDENTITY).abs_diff_eq(sketchrodgs_rod::DMat3::ZERO, 1e-12)
         );
         let t = (x[j + 1] - x[j]).normalize();
-        assert!(
-            (f.z_axis - t).length() < 1e-12,
-            "third column is the tangent"
-        );
+        assert!((f.z_axis - t).length() < 1e-12, "third column is the tangent");
     }
     let v = rod.vertex_frames();
     assert_eq!(v.len(), 25);

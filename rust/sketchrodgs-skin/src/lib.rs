@@ -43,7 +43,9 @@ pub enum SkinError {
     TooFewVertices(usize),
     #[error("{vertices} deformed vertices but {rotations} vertex rotations and {rest} rest vertices")]
     RotationCount { vertices: usize, rotations: usize, rest: usize },
-    #[error("binding arrays disagree in length: segment {segment}, t {t}, offset {offset}, rotation {rotation}, scale {scale}, weight {weight}")]
+    #[error(
+        "binding arrays disagree in length: segment {segment}, t {t}, offset {offset}, rotation {rotation}, scale {scale}, weight {weight}"
+    )]
     BindingLengths { segment: usize, t: usize, offset: usize, rotation: usize, scale: usize, weight: usize },
     #[error("output arrays hold {got} rows but the binding has {want}")]
     OutputLength { got: usize, want: usize },
@@ -152,7 +154,8 @@ fn check(pose: &Pose, binding: &Binding) -> Result<Vec<Segment>, SkinError> {
         return Err(SkinError::RotationCount { vertices: m, rotations: pose.rotation.len(), rest: pose.rest.len() });
     }
     let n = binding.len();
-    let lengths = [binding.t.len(), binding.offset.len(), binding.rotation.len(), binding.scale.len(), binding.weight.len()];
+    let lengths =
+        [binding.t.len(), binding.offset.len(), binding.rotation.len(), binding.scale.len(), binding.weight.len()];
     if lengths.iter().any(|&l| l != n) {
         let [t, offset, rotation, scale, weight] = lengths;
         return Err(SkinError::BindingLengths { segment: n, t, offset, rotation, scale, weight });
@@ -196,10 +199,16 @@ fn skin_into(
     quats: &mut [[f32; 4]],
     scales: &mut [[f32; 3]],
 ) {
-    means.par_chunks_mut(CHUNK).zip(quats.par_chunks_mut(CHUNK)).zip(scales.par_chunks_mut(CHUNK)).enumerate().for_each(
-        |(chunk, ((means, quats), scales))| {
+    means
+        .par_chunks_mut(CHUNK)
+        .zip(quats.par_chunks_mut(CHUNK))
+        .zip(scales.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(chunk, ((means, quats), scales))| {
             let start = chunk * CHUNK;
-            for (k, ((mean, rotated), scaled)) in means.iter_mut().zip(quats.iter_mut()).zip(scales.iter_mut()).enumerate() {
+            for (k, ((mean, rotated), scaled)) in
+                means.iter_mut().zip(quats.iter_mut()).zip(scales.iter_mut()).enumerate()
+            {
                 let g = start + k;
                 let i = binding.segment[g] as usize;
                 let t = binding.t[g].clamp(0.0, 1.0);
@@ -228,8 +237,7 @@ fn skin_into(
                     *scaled = new_scale;
                 }
             }
-        },
-    );
+        });
 }
 
 /// The scales of a Gaussian stretched by `stretch` along `direction`, each own axis `e_k`
@@ -237,7 +245,11 @@ fn skin_into(
 fn stretched_axes(own: Quat, scale: [f32; 3], direction: Vec3, stretch: f32) -> [f32; 3] {
     let d = own.inverse() * direction;
     let grow = stretch * stretch - 1.0; // |(I + ε d dᵀ) e_k|² = 1 + (2ε + ε²) d_k²
-    [scale[0] * (1.0 + grow * d.x * d.x).sqrt(), scale[1] * (1.0 + grow * d.y * d.y).sqrt(), scale[2] * (1.0 + grow * d.z * d.z).sqrt()]
+    [
+        scale[0] * (1.0 + grow * d.x * d.x).sqrt(),
+        scale[1] * (1.0 + grow * d.y * d.y).sqrt(),
+        scale[2] * (1.0 + grow * d.z * d.z).sqrt(),
+    ]
 }
 
 /// A Gaussian (rotation `own`, scales `scale`) stretched by `stretch` along the world direction
@@ -336,7 +348,14 @@ mod tests {
         let offset: Vec<[f32; 3]> = (0..100).map(|g| [0.0, (g as f32).sin() * 0.02, (g as f32).cos() * 0.02]).collect();
         let rotation: Vec<[f32; 4]> = (0..100).map(|g| wxyz(Quat::from_rotation_y(g as f32 * 0.1))).collect();
         let r = rows(100);
-        let binding = Binding { segment: &segment, t: &t, offset: &offset, rotation: &rotation, scale: &r.scale, weight: &r.weight };
+        let binding = Binding {
+            segment: &segment,
+            t: &t,
+            offset: &offset,
+            rotation: &rotation,
+            scale: &r.scale,
+            weight: &r.weight,
+        };
         let pose = Pose { rest: &rest, deformed: &deformed, rotation: &rotations };
         let out = skin(&pose, &binding).unwrap();
         for g in 0..100 {
@@ -353,8 +372,12 @@ mod tests {
         let rest = straight_rod(4);
         let r = rows(2);
         let binding = Binding {
-            segment: &[0, 2], t: &[0.0, 1.0], offset: &[[0.0, 0.01, 0.0], [0.0, 0.0, 0.02]], rotation: &[ID; 2],
-            scale: &r.scale, weight: &r.weight,
+            segment: &[0, 2],
+            t: &[0.0, 1.0],
+            offset: &[[0.0, 0.01, 0.0], [0.0, 0.0, 0.02]],
+            rotation: &[ID; 2],
+            scale: &r.scale,
+            weight: &r.weight,
         };
         let out = skin(&Pose { rest: &rest, deformed: &rest, rotation: &[ID; 4] }, &binding).unwrap();
         assert_eq!(out.means[0], [0.0, 0.01, 0.0]);
@@ -369,7 +392,14 @@ mod tests {
         let rotations = [ID, wxyz(Quat::from_rotation_z(0.785)), wxyz(Quat::from_rotation_z(1.571))];
         let offset = [[0.0, 0.0, 0.1], [0.0, 0.0, 0.1]];
         let r = rows(2);
-        let binding = Binding { segment: &[0, 1], t: &[1.0, 0.0], offset: &offset, rotation: &[ID; 2], scale: &r.scale, weight: &r.weight };
+        let binding = Binding {
+            segment: &[0, 1],
+            t: &[1.0, 0.0],
+            offset: &offset,
+            rotation: &[ID; 2],
+            scale: &r.scale,
+            weight: &r.weight,
+        };
         let out = skin(&Pose { rest: &rest, deformed: &deformed, rotation: &rotations }, &binding).unwrap();
         assert!((Vec3::from(out.means[0]) - Vec3::from(out.means[1])).length() < 1e-6);
         assert!(quat(out.quats[0]).angle_between(quat(out.quats[1])) < 1e-6);
@@ -381,8 +411,12 @@ mod tests {
         let deformed: Vec<[f32; 3]> = rest.iter().map(|p| [p[0], p[1] + 1.0, p[2]]).collect();
         let turn = wxyz(Quat::from_rotation_x(0.8));
         let binding = Binding {
-            segment: &[1, 1, 1], t: &[0.5; 3], offset: &[[0.0, 0.0, 0.0]; 3], rotation: &[ID; 3],
-            scale: &[[0.01; 3]; 3], weight: &[0.0, 0.25, 1.0],
+            segment: &[1, 1, 1],
+            t: &[0.5; 3],
+            offset: &[[0.0, 0.0, 0.0]; 3],
+            rotation: &[ID; 3],
+            scale: &[[0.01; 3]; 3],
+            weight: &[0.0, 0.25, 1.0],
         };
         let out = skin(&Pose { rest: &rest, deformed: &deformed, rotation: &[turn; 3] }, &binding).unwrap();
         assert_eq!(out.means[0], [0.15, 0.0, 0.0]);
@@ -398,7 +432,14 @@ mod tests {
         let deformed = [[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]];
         let own = wxyz(Quat::from_euler(glam::EulerRot::XYZ, 0.4, 0.9, -0.3));
         let scale = [0.03, 0.01, 0.004];
-        let binding = Binding { segment: &[0], t: &[0.5], offset: &[[0.0; 3]], rotation: &[own], scale: &[scale], weight: &[1.0] };
+        let binding = Binding {
+            segment: &[0],
+            t: &[0.5],
+            offset: &[[0.0; 3]],
+            rotation: &[own],
+            scale: &[scale],
+            weight: &[1.0],
+        };
         let out = skin(&Pose { rest: &rest, deformed: &deformed, rotation: &[ID; 2] }, &binding).unwrap();
         let f = Mat3::from_diagonal(Vec3::new(1.5, 1.0, 1.0));
         let want = f * covariance(own, scale) * f.transpose();
@@ -428,16 +469,36 @@ mod tests {
         let r = rows(1);
         let pose3 = |rest: &'static [[f32; 3]]| rest;
         let rod = straight_rod(3);
-        let b = Binding { segment: &[3], t: &[0.5], offset: &[[0.0; 3]], rotation: &[ID], scale: &r.scale, weight: &r.weight };
+        let b = Binding {
+            segment: &[3],
+            t: &[0.5],
+            offset: &[[0.0; 3]],
+            rotation: &[ID],
+            scale: &r.scale,
+            weight: &r.weight,
+        };
         let pose = Pose { rest: &rod, deformed: &rod, rotation: &[ID; 3] };
         assert_eq!(skin(&pose, &b).unwrap_err(), SkinError::SegmentOutOfRange { index: 0, segment: 3, segments: 2 });
         assert!(matches!(skin(&Pose { rotation: &[ID; 2], ..pose }, &b), Err(SkinError::RotationCount { .. })));
         let one = pose3(&[[0.0; 3]]);
-        assert!(matches!(skin(&Pose { rest: one, deformed: one, rotation: &[ID] }, &b), Err(SkinError::TooFewVertices(1))));
+        assert!(matches!(
+            skin(&Pose { rest: one, deformed: one, rotation: &[ID] }, &b),
+            Err(SkinError::TooFewVertices(1))
+        ));
         let mut bad = straight_rod(3);
         bad[1][0] = f32::NAN;
-        let ok = Binding { segment: &[0], t: &[0.5], offset: &[[0.0; 3]], rotation: &[ID], scale: &r.scale, weight: &r.weight };
-        assert_eq!(skin(&Pose { deformed: &bad, ..pose }, &ok).unwrap_err(), SkinError::NonFiniteVertex { which: "deformed", index: 1 });
+        let ok = Binding {
+            segment: &[0],
+            t: &[0.5],
+            offset: &[[0.0; 3]],
+            rotation: &[ID],
+            scale: &r.scale,
+            weight: &r.weight,
+        };
+        assert_eq!(
+            skin(&Pose { deformed: &bad, ..pose }, &ok).unwrap_err(),
+            SkinError::NonFiniteVertex { which: "deformed", index: 1 }
+        );
         let flat = [[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]];
         assert_eq!(skin(&Pose { rest: &flat, ..pose }, &ok).unwrap_err(), SkinError::ZeroLengthSegment(0));
         let short = Binding { weight: &[], ..ok };
