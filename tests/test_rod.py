@@ -391,6 +391,24 @@ def test_arrays_out_are_float64_c_contiguous_and_fresh():
     assert rod.masses.sum() == pytest.approx(1000 * np.pi * 0.01**2 * 1.0)
 
 
+def test_the_defaults_are_the_rod_crates():
+    from sketchrodgs import _core
+
+    # one source: RodParams and SolverSettings show the crate's defaults, and a rod made without
+    # a material has them on the Rust side too
+    assert RodParams().to_dict() == {**_core.default_rod_params(), "gravity": [0.0, 0.0, 0.0]}
+    assert SolverSettings().to_dict() == _core.default_solver_settings()
+    rod = Rod(straight(5))
+    assert rod.params == RodParams()
+    on_the_rust_side = rod.world._core.params(rod.index)
+    assert on_the_rust_side["youngs_modulus"] == RodParams().youngs_modulus and on_the_rust_side["radius"] == RodParams().radius
+    assert Rod(straight(5), youngs_modulus=3e6).params.youngs_modulus == 3e6
+    with pytest.raises(SimulationError, match="unknown material field"):
+        Rod(straight(5), young=3e6)
+    with pytest.raises(SimulationError, match="not both"):
+        Rod(straight(5), params=RodParams(), radius=0.1)
+
+
 def test_params_and_settings_round_trip_through_json():
     p = RodParams(radius=0.02, youngs_modulus=5e6, shear_modulus=1e6, damping=0.5, gravity=(0, -9.81, 0))
     assert RodParams.from_dict(json.loads(json.dumps(p.to_dict()))) == p

@@ -32,6 +32,9 @@ import numpy.typing as npt
 from . import _core
 from .errors import SimulationError
 
+_DEFAULT_MATERIAL: dict[str, Any] = _core.default_rod_params()
+_DEFAULT_SOLVER: dict[str, Any] = _core.default_solver_settings()
+
 __all__ = [
     "Rod",
     "RodEnergy",
@@ -62,13 +65,14 @@ class RodParams:
         gravity: gravitational acceleration [m/s^2]; zero (off) by default.
     """
 
-    radius: float = 0.01
-    youngs_modulus: float = 1.0e7
-    shear_modulus: float | None = None
-    poisson_ratio: float = 0.5
-    density: float = 1000.0
-    damping: float = 2.0
-    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # the defaults are the rod crate's (`_core.default_rod_params`), the one place they are written
+    radius: float = _DEFAULT_MATERIAL["radius"]
+    youngs_modulus: float = _DEFAULT_MATERIAL["youngs_modulus"]
+    shear_modulus: float | None = _DEFAULT_MATERIAL["shear_modulus"]
+    poisson_ratio: float = _DEFAULT_MATERIAL["poisson_ratio"]
+    density: float = _DEFAULT_MATERIAL["density"]
+    damping: float = _DEFAULT_MATERIAL["damping"]
+    gravity: tuple[float, float, float] = tuple(_DEFAULT_MATERIAL["gravity"])  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         g = tuple(float(v) for v in self.gravity)
@@ -107,10 +111,10 @@ class SolverSettings:
         max_static_iterations: Newton iterations of a quasi-static solve.
     """
 
-    tolerance: float = 1.0e-7
-    max_iterations: int = 25
-    max_halvings: int = 8
-    max_static_iterations: int = 200
+    tolerance: float = _DEFAULT_SOLVER["tolerance"]
+    max_iterations: int = _DEFAULT_SOLVER["max_iterations"]
+    max_halvings: int = _DEFAULT_SOLVER["max_halvings"]
+    max_static_iterations: int = _DEFAULT_SOLVER["max_static_iterations"]
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -315,9 +319,9 @@ class Rod:
     Args:
         polyline: (N, 3) vertex positions [m], N >= 2, no zero-length edges (see
             `merge_coincident`).
-        radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity: the
-            material, see `RodParams` (ignored when `params` is given).
-        params: the material as a `RodParams`.
+        params: the material as a `RodParams`, or
+        **material: its fields as keywords (radius=..., youngs_modulus=..., ...), the others at
+            `RodParams`'s defaults (the rod crate's).
         world: the world to add the rod to; a private one by default.
 
     Raises:
@@ -328,26 +332,17 @@ class Rod:
         self,
         polyline: npt.ArrayLike,
         *,
-        radius: float = 0.01,
-        youngs_modulus: float = 1.0e7,
-        shear_modulus: float | None = None,
-        poisson_ratio: float = 0.5,
-        density: float = 1000.0,
-        damping: float = 2.0,
-        gravity: Sequence[float] = (0.0, 0.0, 0.0),
         params: RodParams | None = None,
         world: World | None = None,
+        **material: Any,
     ) -> None:
         if params is None:
-            params = RodParams(
-                radius=radius,
-                youngs_modulus=youngs_modulus,
-                shear_modulus=shear_modulus,
-                poisson_ratio=poisson_ratio,
-                density=density,
-                damping=damping,
-                gravity=tuple(gravity),  # type: ignore[arg-type]
-            )
+            unknown = set(material) - set(RodParams.__dataclass_fields__)
+            if unknown:
+                raise SimulationError(f"unknown material field(s) {', '.join(sorted(unknown))}; see RodParams")
+            params = RodParams(**material)
+        elif material:
+            raise SimulationError("give the material either as params=RodParams(...) or as keywords, not both")
         self._world = world if world is not None else World()
         p = params
         self._index: int | None = self._world._core.add_rod(

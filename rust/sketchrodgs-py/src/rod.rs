@@ -115,13 +115,7 @@ impl RodWorld {
 
     /// Solver settings as a dict.
     fn solver<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let s = self.world.settings;
-        let d = PyDict::new(py);
-        d.set_item("tolerance", s.tolerance)?;
-        d.set_item("max_iterations", s.max_iterations)?;
-        d.set_item("max_halvings", s.max_halvings)?;
-        d.set_item("max_static_iterations", s.max_static_iterations)?;
-        Ok(d)
+        settings_dict(py, &self.world.settings)
     }
 
     fn set_solver(
@@ -308,20 +302,46 @@ impl RodWorld {
 
     /// Material parameters of rod `rod` as a dict (shear modulus resolved).
     fn params<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyDict>> {
-        let p = self.rod(rod)?.params();
-        let d = PyDict::new(py);
-        d.set_item("radius", p.radius)?;
-        d.set_item("youngs_modulus", p.youngs_modulus)?;
-        d.set_item("shear_modulus", p.shear_modulus)?;
-        d.set_item("poisson_ratio", p.poisson_ratio)?;
-        d.set_item("density", p.density)?;
-        d.set_item("damping", p.damping)?;
-        d.set_item("gravity", p.gravity)?;
-        Ok(d)
+        params_dict(py, self.rod(rod)?.params())
     }
+}
+
+fn params_dict<'py>(py: Python<'py>, p: &RodParams) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("radius", p.radius)?;
+    d.set_item("youngs_modulus", p.youngs_modulus)?;
+    d.set_item("shear_modulus", p.shear_modulus)?;
+    d.set_item("poisson_ratio", p.poisson_ratio)?;
+    d.set_item("density", p.density)?;
+    d.set_item("damping", p.damping)?;
+    d.set_item("gravity", p.gravity)?;
+    Ok(d)
+}
+
+fn settings_dict<'py>(py: Python<'py>, s: &SolverSettings) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("tolerance", s.tolerance)?;
+    d.set_item("max_iterations", s.max_iterations)?;
+    d.set_item("max_halvings", s.max_halvings)?;
+    d.set_item("max_static_iterations", s.max_static_iterations)?;
+    Ok(d)
+}
+
+/// The rod crate's default material (the one source of the defaults `RodParams` shows).
+#[pyfunction]
+fn default_rod_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    params_dict(py, &RodParams::default())
+}
+
+/// The rod crate's default solver settings (the one source of `SolverSettings`'s defaults).
+#[pyfunction]
+fn default_solver_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    settings_dict(py, &SolverSettings::default())
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RodWorld>()?;
+    m.add_function(wrap_pyfunction!(default_rod_params, m)?)?;
+    m.add_function(wrap_pyfunction!(default_solver_settings, m)?)?;
     Ok(())
 }
