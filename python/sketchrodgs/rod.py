@@ -22,7 +22,6 @@ Several rods share a `World` and are stepped together: `w = World(); a = Rod(p, 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 

@@ -10,8 +10,9 @@
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::project::{MIN_GAUSSIANS_PER_TASK, Splat2D, TileRect};
+use crate::project::{MIN_GAUSSIANS_PER_TASK, Splat2D};
 use crate::tiles::TileMask;
+use crate::tiles::TileRect;
 use crate::{RasterError, try_filled};
 
 /// Most per-chunk tile counters kept in memory at once (chunks x tiles).

@@ -5,7 +5,7 @@ use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, CameraF32};
-use crate::tiles::TileMask;
+use crate::tiles::{TileMask, TileRect};
 use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
 
 /// Gaussians per rayon task in the per-Gaussian passes.
@@ -29,26 +29,6 @@ pub struct Splat2D {
     /// Inclusive pixel box `[x0, y0, x1, y1]`, clipped to the image, outside which alpha < 1/255
     /// (pixels outside it would be skipped anyway, so compositing never visits them).
     pub pixel_box: [u16; 4],
-}
-
-/// Half-open tile range `[x0, x1) x [y0, y1)` a Gaussian is binned into; empty for a culled
-/// Gaussian. (At most 1024 tiles a side, see `MAX_IMAGE_SIDE`.)
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct TileRect {
-    pub x0: u16,
-    pub y0: u16,
-    pub x1: u16,
-    pub y1: u16,
-}
-
-impl TileRect {
-    pub fn is_empty(&self) -> bool {
-        self.x0 >= self.x1 || self.y0 >= self.y1
-    }
-
-    pub fn area(&self) -> usize {
-        if self.is_empty() { 0 } else { usize::from(self.x1 - self.x0) * usize::from(self.y1 - self.y0) }
-    }
 }
 
 /// The projected Gaussians: `splats[k]` and `rects[k]` are Gaussian `ids[k]`, or Gaussian k when

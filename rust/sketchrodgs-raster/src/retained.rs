@@ -10,8 +10,9 @@ use rayon::prelude::*;
 use crate::bin::{TileBins, sort_by_depth};
 use crate::camera::{Camera, CameraF32};
 use crate::composite::{Source, blank, composite_into};
-use crate::project::{Projected, Splat2D, TileRect, project_one, project_static};
+use crate::project::{Projected, Splat2D, project_one, project_static};
 use crate::tiles::TileMask;
+use crate::tiles::TileRect;
 use crate::{MAX_TILE_PAIRS, RasterError, RenderMode, RenderOptions, RenderOutput, Splats};
 
 /// A render kept from frame to frame.

@@ -4,8 +4,27 @@
 //! on its own from the same front-to-back list.
 
 use crate::camera::Camera;
-use crate::project::TileRect;
 use crate::{RasterError, TILE_SIZE};
+
+/// Half-open tile range `[x0, x1) x [y0, y1)` a Gaussian is binned into; empty for a culled
+/// Gaussian. (At most 1024 tiles a side, see `MAX_IMAGE_SIDE`.)
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TileRect {
+    pub x0: u16,
+    pub y0: u16,
+    pub x1: u16,
+    pub y1: u16,
+}
+
+impl TileRect {
+    pub fn is_empty(&self) -> bool {
+        self.x0 >= self.x1 || self.y0 >= self.y1
+    }
+
+    pub fn area(&self) -> usize {
+        if self.is_empty() { 0 } else { usize::from(self.x1 - self.x0) * usize::from(self.y1 - self.y0) }
+    }
+}
 
 /// Which tiles of a camera's grid to render, with a summed-area table so that a footprint's
 /// rectangle is tested in constant time.

@@ -63,6 +63,20 @@ pub fn average_rotation(a: DQuat, b: DQuat) -> DQuat {
     if len > 1.0e-12 { s / len } else { a }
 }
 
+/// Rotation of vertex `i`: the average of its edges' frames (one edge at the ends).
+pub(crate) fn vertex_rotation(edge_frames: &[DMat3], i: usize) -> DMat3 {
+    let ne = edge_frames.len();
+    let q = |j: usize| DQuat::from_mat3(&edge_frames[j]).normalize();
+    let r = if i == 0 {
+        q(0)
+    } else if i >= ne {
+        q(ne - 1)
+    } else {
+        average_rotation(q(i - 1), q(i))
+    };
+    DMat3::from_quat(r)
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
