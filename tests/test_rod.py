@@ -401,7 +401,10 @@ def test_the_defaults_are_the_rod_crates():
     rod = Rod(straight(5))
     assert rod.params == RodParams()
     on_the_rust_side = rod.world._core.params(rod.index)
-    assert on_the_rust_side["youngs_modulus"] == RodParams().youngs_modulus and on_the_rust_side["radius"] == RodParams().radius
+    assert (
+        on_the_rust_side["youngs_modulus"] == RodParams().youngs_modulus
+        and on_the_rust_side["radius"] == RodParams().radius
+    )
     assert Rod(straight(5), youngs_modulus=3e6).params.youngs_modulus == 3e6
     with pytest.raises(SimulationError, match="unknown material field"):
         Rod(straight(5), young=3e6)
