@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     summary = run_demo(out, sample=SAMPLE, progress=lambda line: print(f"  {line}", flush=True))
     print(
-        f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json, frames/ ({summary['frames']} PNGs), "
+        f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json (+ rod.bindings.npz), frames/ ({summary['frames']} PNGs), "
         f"pull.mp4, summary.txt in {summary['total_s']:.1f} s"
     )
     if args.view:
