@@ -71,7 +71,7 @@ def skin_rows() -> list[list[object]]:
                 quats,
                 scales,
                 rest,
-                np.tile(np.eye(3), (rod.num_vertices, 1, 1)),
+                np.tile([1.0, 0.0, 0.0, 0.0], (rod.num_vertices, 1)),
             )
             means, out_quats, out_scales = rng.normal(size=(count, 3)).astype(np.float32), quats.copy(), scales.copy()
             seconds = best_time(lambda: skin_into(means, out_quats, out_scales, [bound], [rod]), repeat=7)

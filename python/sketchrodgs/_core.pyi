@@ -175,7 +175,8 @@ def grow_part(
 def skin_scatter(
     rest: npt.NDArray[np.float32],
     deformed: npt.NDArray[np.float32],
-    vertex_rotation: npt.NDArray[np.float32],
+    rest_frames: npt.NDArray[np.float64],
+    frames: npt.NDArray[np.float64],
     segment: npt.NDArray[np.int32],
     t: npt.NDArray[np.float32],
     offset: npt.NDArray[np.float32],

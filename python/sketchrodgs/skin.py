@@ -40,7 +40,7 @@ class BoundRod:
         rest_quats: (G, 4) float32 the Gaussians' rotations at rest (w, x, y, z).
         rest_scales: (G, 3) float32 their scales at rest.
         rest_positions: (M, 3) float32 the rod's vertices at rest.
-        rest_frames: (M, 3, 3) float64 the rod's vertex frames at rest.
+        rest_frames: (M, 4) float64 the rod's vertex frames at rest, as unit quaternions w, x, y, z.
     """
 
     gaussian_ids: np.ndarray
@@ -77,7 +77,7 @@ class BoundRod:
             np.ascontiguousarray(scene.quats[ids], np.float32),
             np.ascontiguousarray(scene.scales[ids], np.float32),
             np.ascontiguousarray(rod.positions, np.float32),
-            np.array(rod.vertex_frames, np.float64),
+            np.array(rod.vertex_quats, np.float64),
         )
 
     @classmethod
@@ -118,12 +118,6 @@ def matrices_to_quats(matrices: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def vertex_rotations(rod: Rod, rest_frames: np.ndarray) -> np.ndarray:
-    """(M, 4) float32 rotations (w, x, y, z) that carry each rest vertex frame to its frame now."""
-    now = np.asarray(rod.vertex_frames, np.float64)
-    return matrices_to_quats(now @ np.transpose(rest_frames, (0, 2, 1))).astype(np.float32)
-
-
 def skin_into(
     means: np.ndarray, quats: np.ndarray, scales: np.ndarray, bound: Sequence[BoundRod], rods: Sequence[Rod]
 ) -> None:
@@ -140,7 +134,8 @@ def skin_into(
         _core.skin_scatter(
             b.rest_positions,
             deformed,
-            vertex_rotations(rod, b.rest_frames),
+            b.rest_frames,
+            np.ascontiguousarray(rod.vertex_quats, np.float64),
             b.segment,
             b.t,
             b.offset,

@@ -2,7 +2,7 @@
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use sketchrodgs_skin::{Binding, Pose, skin_in_place};
+use sketchrodgs_skin::{Binding, Pose, frame_rotations, skin_in_place};
 
 use crate::arrays::{as_rows, check_shape, contiguous, contiguous_mut};
 use crate::errors::SketchRodGSError;
@@ -10,17 +10,19 @@ use crate::pool::run_parallel;
 
 /// Skin one rod's bound Gaussians and write them into the scene arrays, in place.
 ///
-/// rest (M, 3), deformed (M, 3) and vertex_rotation (M, 4) wxyz describe the rod (rotations from
-/// the rest vertex frames); segment (G,) int32, t (G,), offset (G, 3), rest_quats (G, 4),
-/// rest_scales (G, 3) and weight (G,) the binding; ids (G,) int64 the rows of `means` (N, 3),
-/// `quats` (N, 4) and `scales` (N, 3) to overwrite. All float32.
+/// rest (M, 3) and deformed (M, 3) positions, and rest_frames and frames (M, 4) float64 w, x, y, z
+/// (the rod's vertex frames at rest and now, `vertex_quats`) describe the rod; segment (G,) int32,
+/// t (G,), offset (G, 3), rest_quats (G, 4), rest_scales (G, 3) and weight (G,) the binding; ids
+/// (G,) int64 the rows of `means` (N, 3), `quats` (N, 4) and `scales` (N, 3) to overwrite. All
+/// float32 but the frames.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn skin_scatter<'py>(
     py: Python<'py>,
     rest: &Bound<'py, PyArray2<f32>>,
     deformed: &Bound<'py, PyArray2<f32>>,
-    vertex_rotation: &Bound<'py, PyArray2<f32>>,
+    rest_frames: &Bound<'py, PyArray2<f64>>,
+    frames: &Bound<'py, PyArray2<f64>>,
     segment: &Bound<'py, PyArray1<i32>>,
     t: &Bound<'py, PyArray1<f32>>,
     offset: &Bound<'py, PyArray2<f32>>,
@@ -32,8 +34,8 @@ fn skin_scatter<'py>(
     quats: &Bound<'py, PyArray2<f32>>,
     scales: &Bound<'py, PyArray2<f32>>,
 ) -> PyResult<()> {
-    let (rest, deformed, vertex_rotation) =
-        (rest.try_readonly()?, deformed.try_readonly()?, vertex_rotation.try_readonly()?);
+    let (rest, deformed) = (rest.try_readonly()?, deformed.try_readonly()?);
+    let (rest_frames, frames) = (rest_frames.try_readonly()?, frames.try_readonly()?);
     let (segment, t, offset, rest_quats, rest_scales, weight, ids) = (
         segment.try_readonly()?,
         t.try_readonly()?,
@@ -47,7 +49,10 @@ fn skin_scatter<'py>(
     let g = segment.shape()[0];
     check_shape("deformed", deformed.shape(), &[None, Some(3)])?;
     check_shape("rest", rest.shape(), &[Some(m), Some(3)])?;
-    check_shape("vertex_rotation", vertex_rotation.shape(), &[Some(m), Some(4)])?;
+    check_shape("rest_frames", rest_frames.shape(), &[Some(m), Some(4)])?;
+    check_shape("frames", frames.shape(), &[Some(m), Some(4)])?;
+    let rotation =
+        frame_rotations(as_rows(contiguous(&rest_frames, "rest_frames")?), as_rows(contiguous(&frames, "frames")?));
     check_shape("t", t.shape(), &[Some(g)])?;
     check_shape("offset", offset.shape(), &[Some(g), Some(3)])?;
     check_shape("rest_quats", rest_quats.shape(), &[Some(g), Some(4)])?;
@@ -80,7 +85,7 @@ fn skin_scatter<'py>(
     let pose = Pose {
         rest: as_rows(contiguous(&rest, "rest")?),
         deformed: as_rows(contiguous(&deformed, "deformed")?),
-        rotation: as_rows(contiguous(&vertex_rotation, "vertex_rotation")?),
+        rotation: &rotation,
     };
     let means_out = contiguous_mut(&mut means, "means")?;
     let quats_out = contiguous_mut(&mut quats, "quats")?;

@@ -98,6 +98,19 @@ fn quat(q: [f32; 4]) -> Quat {
     Quat::from_xyzw(q[1], q[2], q[3], q[0])
 }
 
+/// Per vertex, the rotation (`w, x, y, z`) that carries its rest frame to its frame now, from the
+/// rod's vertex frames as unit quaternions `w, x, y, z` (`ElasticRod::vertex_quats`).
+pub fn frame_rotations(rest: &[[f64; 4]], now: &[[f64; 4]]) -> Vec<[f32; 4]> {
+    let dquat = |q: &[f64; 4]| glam::DQuat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
+    rest.iter()
+        .zip(now)
+        .map(|(r, n)| {
+            let q = (dquat(n) * dquat(r).conjugate()).normalize();
+            [q.w as f32, q.x as f32, q.y as f32, q.z as f32]
+        })
+        .collect()
+}
+
 /// Blend of two unit rotations at `t` (normalised lerp on the shorter arc).
 #[inline]
 fn blend(a: Quat, b: Quat, t: f32) -> Quat {
@@ -462,6 +475,18 @@ mod tests {
             assert!((back.col(c) - a.as_dmat3().col(c)).abs().max_element() < 1e-5);
         }
         assert!((v.determinant() - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn frame_rotations_carry_the_rest_frames_to_the_frames_now() {
+        let rest = [[0.9_f64, 0.1, -0.3, 0.2], [1.0, 0.0, 0.0, 0.0]];
+        let now = [[0.2_f64, 0.7, 0.1, -0.5], [0.0, 0.0, 1.0, 0.0]];
+        for ((r, n), q) in rest.iter().zip(&now).zip(frame_rotations(&rest, &now)) {
+            let to = |q: &[f64; 4]| glam::DQuat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
+            let turn = glam::DQuat::from_xyzw(f64::from(q[1]), f64::from(q[2]), f64::from(q[3]), f64::from(q[0]));
+            let carried = turn * to(r);
+            assert!(carried.dot(to(n)).abs() > 1.0 - 1e-6, "{carried:?} vs {:?}", to(n));
+        }
     }
 
     #[test]
