@@ -523,12 +523,12 @@ def test_non_finite_gaussians_in_raw_arrays_are_dropped_not_fatal():
     out = _core.rasterize(
         means, scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 64, 48, 100.0, 100.0, 32.5, 24.5
     )
-    assert out["n_visible"] == 1 and out["index"][24, 32] == 0
+    assert out.n_visible == 1 and out.index[24, 32] == 0
     scales[0] = np.inf
     out = _core.rasterize(
         means, scales, scene.quats, scene.opacities, scene.sh, np.eye(4), 64, 48, 100.0, 100.0, 32.5, 24.5
     )
-    assert out["n_visible"] == 0 and (out["index"] == -1).all()
+    assert out.n_visible == 0 and (out.index == -1).all()
 
 
 # -- command line ---------------------------------------------------------------------------

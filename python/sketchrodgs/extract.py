@@ -326,7 +326,7 @@ def extract_rod(
     if partial is not None:
         timings["rendered_tiles"] = float(partial.tiles.mean())
     flip = _flipped(stroke)
-    pieces = trace["pieces"]
+    pieces = trace.pieces
 
     clock = time.perf_counter()
     if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
@@ -357,7 +357,7 @@ def extract_rod(
     binding = sg.segment_and_bind(polyline, scene, radius, grow=segment_scale, attach=attach, attach_size=attach_size)
     timings["segment_bind"] = time.perf_counter() - clock
     # every piece but the last ends at a gap, in either direction, so the flags need no reversal
-    reached = [bool(p["reached_goal"]) for p in pieces]
+    reached = [bool(p.reached_goal) for p in pieces]
     return Extraction(
         polyline=polyline.astype(np.float32),
         radius=float(radius),
@@ -366,7 +366,7 @@ def extract_rod(
         path_gaussian_ids=path_ids,
         gaussian_ids=binding.gaussian_ids,
         binding=binding,
-        coverage=float(trace["coverage"]),
+        coverage=float(trace.coverage),
         pieces_reached_goal=reached,
         camera=camera,
         stroke=stroke,
@@ -403,7 +403,7 @@ def _trace(
         timings["estimate_radius"] = time.perf_counter() - clock
         clock = time.perf_counter()
 
-    def trace_path(radius: float) -> tuple[dict, list[np.ndarray], np.ndarray, np.ndarray]:
+    def trace_path(radius: float) -> tuple[_core.Trace, list[np.ndarray], np.ndarray, np.ndarray]:
         try:
             trace = _core.trace_stroke(
                 index,
@@ -419,10 +419,10 @@ def _trace(
             )
         except PathNotFoundError as err:
             raise _failure(str(err), stroke, []) from None
-        pixel_path = [p["pixels"].astype(np.int64) for p in trace["pieces"]]
+        pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        path_ids = _near_their_pixels(trace["pieces"], index, scene.means, camera, radius)
+        path_ids = _near_their_pixels(trace.pieces, index, scene.means, camera, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
         # the zigzag before the chain is resampled by arc length.
         points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
@@ -440,13 +440,13 @@ def _trace(
 
 
 def _near_their_pixels(
-    pieces: list[dict], index: np.ndarray, means: np.ndarray, camera: Camera, radius: float
+    pieces: list[_core.TracePiece], index: np.ndarray, means: np.ndarray, camera: Camera, radius: float
 ) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
     projects far from the pixel where the path met them: a big Gaussian of what the part touches
     (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's
     edge while its centre lies far away, and would hook the rod's end towards it."""
-    pixels = np.concatenate([p["pixels"].astype(np.int64) for p in pieces])
+    pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
     ids = index[pixels[:, 1], pixels[:, 0]].astype(np.int64)
     _, first = np.unique(ids, return_index=True)
     first = np.sort(first)  # first visit of each Gaussian, in path order
@@ -490,14 +490,14 @@ def _flipped(stroke: np.ndarray) -> bool:
 
 
 def _failure(
-    message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list | None = None
+    message: str, stroke: np.ndarray, pixel_path: list[np.ndarray], pieces: list[_core.TracePiece] | None = None
 ) -> PathNotFoundError:
     """A PathNotFoundError that carries what was found, so that callers can draw it: `stroke`,
     `pixel_path` (pieces of (P, 2) col, row) and `lost_at` ((col, row) where the path stopped)."""
     error = PathNotFoundError(message)
     error.stroke = stroke
     error.pixel_path = pixel_path
-    lost = [p["lost_pixel"] for p in pieces or [] if p["lost_pixel"] is not None]
+    lost = [p.lost_pixel for p in pieces or [] if p.lost_pixel is not None]
     error.lost_at = lost
     return error
 

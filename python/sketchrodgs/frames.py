@@ -81,12 +81,12 @@ class FrameRenderer:
             np.ascontiguousarray(quats, np.float32),
         )
         return RenderResult(
-            rgb=raw["rgb"],
-            alpha=raw["alpha"],
-            depth=raw["depth"],
-            index=raw["index"],
-            index_depth=raw["index_depth"],
-            timings=dict(raw["timings"]),
-            n_visible=int(raw["n_visible"]),
-            n_tile_pairs=int(raw["n_tile_pairs"]),
+            rgb=raw.rgb,
+            alpha=raw.alpha,
+            depth=raw.depth,
+            index=raw.index,
+            index_depth=raw.index_depth,
+            timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
+            n_visible=raw.n_visible,
+            n_tile_pairs=raw.n_tile_pairs,
         )

@@ -119,14 +119,14 @@ def render(
         tiles=tiles,
     )
     return RenderResult(
-        rgb=raw["rgb"],
-        alpha=raw["alpha"],
-        depth=raw["depth"],
-        index=raw["index"],
-        index_depth=raw["index_depth"],
-        timings=dict(raw["timings"]),
-        n_visible=int(raw["n_visible"]),
-        n_tile_pairs=int(raw["n_tile_pairs"]),
+        rgb=raw.rgb,
+        alpha=raw.alpha,
+        depth=raw.depth,
+        index=raw.index,
+        index_depth=raw.index_depth,
+        timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
+        n_visible=raw.n_visible,
+        n_tile_pairs=raw.n_tile_pairs,
     )
 
 

@@ -1,9 +1,8 @@
 //! Bindings for `sketchrodgs-path`: `_core.trace_stroke(...)`.
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadwriteArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
 use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
@@ -24,9 +23,7 @@ fn path_err(err: PathError) -> PyErr {
 /// index (H, W) int32 and depth (H, W) float32 are the index image K and its depth Z; centres
 /// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width;
 /// `focal_px` is the camera's focal length in pixels (0: unknown); `alpha` (H, W) float32 or None.
-/// Returns {"pieces": [{"pixels": (P, 2) uint32 (col, row), "gaussian_ids": (G,) uint32,
-/// "reached_goal": bool, "lost_pixel": (col, row) | None, "lost_progress": float | None}],
-/// "clean_stroke": (M', 2) float32, "coverage": float}. `rendered` (tiles, see `RenderedTiles`)
+/// Returns a `Trace` (its `pieces`, `clean_stroke` and `coverage`). `rendered` (tiles, see `RenderedTiles`)
 /// says that only those 16x16 tiles were rendered; reads outside them are set in `missed`
 /// (same shape, bool), also when the trace fails.
 #[pyfunction]
@@ -46,7 +43,7 @@ fn trace_stroke<'py>(
     alpha: Option<Bound<'py, PyArray2<f32>>>,
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Trace> {
     let (index, depth, centres, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
     let alpha = alpha.as_ref().map(|a| a.try_readonly()).transpose()?;
@@ -69,36 +66,52 @@ fn trace_stroke<'py>(
     region.report()?;
     let trace = trace?.map_err(path_err)?;
 
-    let pieces = PyList::empty(py);
-    for piece in trace.pieces {
-        let dict = PyDict::new(py);
-        let count = piece.pixels.len();
-        let pixels = Array2::from_shape_vec((count, 2), piece.pixels.into_iter().flatten().collect())
-            .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
-        dict.set_item("pixels", pixels.into_pyarray(py))?;
-        dict.set_item("gaussian_ids", piece.gaussian_ids.into_pyarray(py))?;
-        match piece.end {
-            PieceEnd::Goal => {
-                dict.set_item("reached_goal", true)?;
-                dict.set_item("lost_pixel", py.None())?;
-                dict.set_item("lost_progress", py.None())?;
-            }
-            PieceEnd::Lost { pixel, progress } => {
-                dict.set_item("reached_goal", false)?;
-                dict.set_item("lost_pixel", (pixel[0], pixel[1]))?;
-                dict.set_item("lost_progress", progress)?;
-            }
-        }
-        pieces.append(dict)?;
-    }
-    let out = PyDict::new(py);
-    out.set_item("pieces", pieces)?;
+    let pieces = trace
+        .pieces
+        .into_iter()
+        .map(|piece| {
+            let count = piece.pixels.len();
+            let pixels = Array2::from_shape_vec((count, 2), piece.pixels.into_iter().flatten().collect())
+                .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+            let (reached_goal, lost_pixel, lost_progress) = match piece.end {
+                PieceEnd::Goal => (true, None, None),
+                PieceEnd::Lost { pixel, progress } => (false, Some((pixel[0], pixel[1])), Some(progress)),
+            };
+            Py::new(
+                py,
+                TracePiece {
+                    pixels: pixels.into_pyarray(py).unbind(),
+                    gaussian_ids: piece.gaussian_ids.into_pyarray(py).unbind(),
+                    reached_goal,
+                    lost_pixel,
+                    lost_progress,
+                },
+            )
+        })
+        .collect::<PyResult<Vec<_>>>()?;
     let kept = trace.clean_stroke.len();
     let clean = Array2::from_shape_vec((kept, 2), trace.clean_stroke.into_iter().flatten().collect())
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
-    out.set_item("clean_stroke", clean.into_pyarray(py))?;
-    out.set_item("coverage", trace.coverage)?;
-    Ok(out)
+    Ok(Trace { pieces, clean_stroke: clean.into_pyarray(py).unbind(), coverage: trace.coverage })
+}
+
+/// One piece of a trace: its pixels (P, 2) uint32 (col, row), its Gaussians in order, and how it
+/// ended (at the stroke's end, or lost at a pixel, that far along the stroke).
+#[pyclass(module = "sketchrodgs._core", name = "TracePiece", frozen, get_all)]
+pub struct TracePiece {
+    pixels: Py<PyArray2<u32>>,
+    gaussian_ids: Py<PyArray1<u32>>,
+    reached_goal: bool,
+    lost_pixel: Option<(u32, u32)>,
+    lost_progress: Option<f32>,
+}
+
+/// A trace: its pieces, the stroke as cleaned up (M', 2) float32, and the share of it covered.
+#[pyclass(module = "sketchrodgs._core", name = "Trace", frozen, get_all)]
+pub struct Trace {
+    pieces: Vec<Py<TracePiece>>,
+    clean_stroke: Py<PyArray2<f32>>,
+    coverage: f32,
 }
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
@@ -191,5 +204,7 @@ impl<'py> RegionArgs<'py> {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(trace_stroke, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_radius, m)?)?;
+    m.add_class::<Trace>()?;
+    m.add_class::<TracePiece>()?;
     Ok(())
 }

@@ -3,7 +3,6 @@
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 use sketchrodgs_raster::{Camera, RasterError, RenderMode, RenderOptions, RenderOutput, Retained, Splats, TileMask};
 
 use crate::arrays::{check_shape, contiguous};
@@ -17,9 +16,9 @@ fn raster_err(err: RasterError) -> PyErr {
 /// Renders a Gaussian scene for a pinhole camera (see `sketchrodgs.render` for the public API).
 ///
 /// Arrays are float32 and C-contiguous: means (N, 3), scales (N, 3), quats (N, 4) wxyz,
-/// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a dict of numpy
-/// arrays (rgb (H, W, 3), alpha, depth, index (int32), index_depth, each (H, W);
-/// (rgb and depth are None when `index_only`), the stage timings in seconds and the visible/pair counts.
+/// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a `Rendered`: rgb
+/// (H, W, 3), alpha, depth, index (int32) and index_depth, each (H, W) (rgb and depth None when
+/// `index_only`), the stage timings in seconds and the visible and pair counts.
 /// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
 #[pyfunction]
 #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), index_only = false, tiles = None))]
@@ -41,7 +40,7 @@ fn rasterize<'py>(
     background: (f32, f32, f32),
     index_only: bool,
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
-) -> PyResult<Bound<'py, PyDict>> {
+) -> PyResult<Rendered> {
     let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
     let (opacities, sh, w2c) = (opacities.try_readonly()?, sh.try_readonly()?, world_to_camera.try_readonly()?);
     let n = means.shape()[0];
@@ -77,7 +76,7 @@ fn rasterize<'py>(
         Some(mask) => sketchrodgs_raster::rasterize_tiles(&splats, &camera, &options, mask),
     })?;
     let out = out.map_err(raster_err)?;
-    into_dict(py, out)
+    into_rendered(py, out)
 }
 
 fn camera_of(w2c: &[f64], width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Camera {
@@ -97,8 +96,8 @@ fn options_of(background: (f32, f32, f32), index_only: bool) -> RenderOptions {
 
 /// A render kept between the frames of an animation (see `sketchrodgs.frames`): built from the
 /// scene at rest and the rows that may move (int64); `frame(means, scales, quats)` renders the
-/// scene with those rows moved, re-blending only the tiles they touch, and returns the same dict
-/// as `rasterize`.
+/// scene with those rows moved, re-blending only the tiles they touch, and returns a `Rendered`
+/// as `rasterize` does.
 #[pyclass(module = "sketchrodgs._core", name = "RetainedRender")]
 pub struct RetainedRender {
     retained: Retained,
@@ -165,7 +164,7 @@ impl RetainedRender {
         means: &Bound<'py, PyArray2<f32>>,
         scales: &Bound<'py, PyArray2<f32>>,
         quats: &Bound<'py, PyArray2<f32>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<Rendered> {
         let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
         check_shape("means", means.shape(), &[None, Some(3)])?;
         check_shape("scales", scales.shape(), &[None, Some(3)])?;
@@ -175,38 +174,60 @@ impl RetainedRender {
         let retained = &mut self.retained;
         let out = run_parallel(py, "RetainedRender.frame", || retained.frame_flat(means, scales, quats).cloned())?
             .map_err(raster_err)?;
-        into_dict(py, out)
+        into_rendered(py, out)
     }
 }
 
-/// Moves the output buffers into numpy arrays without copying.
-fn into_dict(py: Python<'_>, out: RenderOutput) -> PyResult<Bound<'_, PyDict>> {
+/// The images and figures of one render (`sketchrodgs.render` wraps them in `RenderResult`). The
+/// arrays are the Rust buffers, moved into numpy without a copy.
+#[pyclass(module = "sketchrodgs._core", name = "Rendered", frozen, get_all)]
+pub struct Rendered {
+    /// (H, W, 3) colour, None in index-only mode.
+    rgb: Option<Py<PyArray3<f32>>>,
+    /// (H, W) accumulated opacity.
+    alpha: Py<PyArray2<f32>>,
+    /// (H, W) expected depth, None in index-only mode.
+    depth: Option<Py<PyArray2<f32>>>,
+    /// (H, W) the index image K.
+    index: Py<PyArray2<i32>>,
+    /// (H, W) its depth Z.
+    index_depth: Py<PyArray2<f32>>,
+    /// Seconds of the stages (project, sort and bin, composite).
+    project_s: f64,
+    sort_s: f64,
+    composite_s: f64,
+    n_visible: usize,
+    n_tile_pairs: usize,
+}
+
+fn into_rendered(py: Python<'_>, out: RenderOutput) -> PyResult<Rendered> {
     let (h, w) = (out.height, out.width);
     let shape_err = |e: numpy::ndarray::ShapeError| SketchRodGSError::new_err(format!("internal shape error: {e}"));
-    let dict = PyDict::new(py);
-    dict.set_item("alpha", Array2::from_shape_vec((h, w), out.alpha).map_err(shape_err)?.into_pyarray(py))?;
-    if out.rgb.is_empty() {
-        for key in ["rgb", "depth"] {
-            dict.set_item(key, py.None())?;
-        }
-    } else {
-        dict.set_item("rgb", Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py))?;
-        dict.set_item("depth", Array2::from_shape_vec((h, w), out.depth).map_err(shape_err)?.into_pyarray(py))?;
-    }
-    dict.set_item("index", Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py))?;
-    dict.set_item("index_depth", Array2::from_shape_vec((h, w), out.index_depth).map_err(shape_err)?.into_pyarray(py))?;
-    let timings = PyDict::new(py);
-    timings.set_item("project", out.timings.project_s)?;
-    timings.set_item("sort", out.timings.sort_s)?;
-    timings.set_item("composite", out.timings.composite_s)?;
-    dict.set_item("timings", timings)?;
-    dict.set_item("n_visible", out.n_visible)?;
-    dict.set_item("n_tile_pairs", out.n_tile_pairs)?;
-    Ok(dict)
+    let image2 = |v: Vec<f32>| -> PyResult<Py<PyArray2<f32>>> {
+        Ok(Array2::from_shape_vec((h, w), v).map_err(shape_err)?.into_pyarray(py).unbind())
+    };
+    let colour = !out.rgb.is_empty();
+    Ok(Rendered {
+        rgb: if colour {
+            Some(Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py).unbind())
+        } else {
+            None
+        },
+        alpha: image2(out.alpha)?,
+        depth: if colour { Some(image2(out.depth)?) } else { None },
+        index: Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py).unbind(),
+        index_depth: image2(out.index_depth)?,
+        project_s: out.timings.project_s,
+        sort_s: out.timings.sort_s,
+        composite_s: out.timings.composite_s,
+        n_visible: out.n_visible,
+        n_tile_pairs: out.n_tile_pairs,
+    })
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
     m.add_class::<RetainedRender>()?;
+    m.add_class::<Rendered>()?;
     Ok(())
 }
