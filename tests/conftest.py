@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,3 +35,15 @@ def random_scene(n: int, sh_degree: int = 0, seed: int = 0) -> GaussianScene:
 @pytest.fixture
 def data_dir() -> Path:
     return DATA
+
+
+def outputs_per_thread_count(code: str, counts: tuple[int, ...]) -> set[str]:
+    """What `python -c code` prints with each count of worker threads (a fresh process each): one
+    output means the result does not depend on the thread count."""
+    outputs = set()
+    for threads in counts:
+        env = {**os.environ, "SKETCHRODGS_NUM_THREADS": str(threads)}
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        outputs.add(out.stdout.strip())
+    return outputs

@@ -3,14 +3,11 @@ every frame of a real pull equals a full render of the same scene, and bad input
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 import sketchrodgs
+from conftest import outputs_per_thread_count
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.errors import SketchRodGSError
 from sketchrodgs.frames import FrameRenderer
@@ -65,15 +62,4 @@ def test_frames_are_the_same_for_any_thread_count():
         "[h.update(r.frame(a.means, a.scales, a.quats).rgb.tobytes()) for f in a.frames(Pull(-1, (0, -0.05, 0), 0.1, 0, False, 0), 30)]; "
         "print(h.hexdigest())"
     )
-    digests = set()
-    for threads in ("1", "3"):
-        out = subprocess.run(
-            [sys.executable, "-c", code],
-            env={**os.environ, "SKETCHRODGS_NUM_THREADS": threads},
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        assert out.returncode == 0, out.stderr
-        digests.add(out.stdout.strip())
-    assert len(digests) == 1
+    assert len(outputs_per_thread_count(code, (1, 3))) == 1

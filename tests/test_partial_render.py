@@ -4,15 +4,13 @@ band render finds the same rod as on a full render, on real captures."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import sketchrodgs
+from conftest import outputs_per_thread_count
 from sketchrodgs import consistency as cs
 from sketchrodgs.camera import Camera
 from sketchrodgs.errors import PathNotFoundError, SketchRodGSError
@@ -84,18 +82,7 @@ def test_band_render_is_the_same_for_any_thread_count():
         "r = render(sc, c, outputs='index', tiles=band_tiles(c, st, 26.0)); "
         "print(hashlib.sha256(r.index.tobytes() + r.index_depth.tobytes() + r.alpha.tobytes()).hexdigest())"
     )
-    digests = set()
-    for threads in ("1", "2", "3"):
-        out = subprocess.run(
-            [sys.executable, "-c", code],
-            env={**os.environ, "RAYON_NUM_THREADS": threads},
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        assert out.returncode == 0, out.stderr
-        digests.add(out.stdout.strip())
-    assert len(digests) == 1
+    assert len(outputs_per_thread_count(code, (1, 2, 3))) == 1
 
 
 def _rod_or_error(scene, camera, stroke, radius, **kwargs):

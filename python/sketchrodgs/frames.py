@@ -13,8 +13,8 @@ import numpy as np
 
 from . import _core
 from .camera import Camera
-from .errors import CameraError, SketchRodGSError
-from .render import RenderResult, _background, _index_only
+from .errors import SketchRodGSError
+from .render import RenderResult, _background, _check_inputs, _core_inputs, _index_only
 from .scene import GaussianScene
 
 
@@ -38,27 +38,12 @@ class FrameRenderer:
         background: Iterable[float] = (0.0, 0.0, 0.0),
         outputs: str | Iterable[str] = "all",
     ):
-        if not isinstance(scene, GaussianScene):
-            raise SketchRodGSError(f"scene: expected a GaussianScene, got {type(scene).__name__}")
-        if not isinstance(camera, Camera):
-            raise CameraError(f"camera: expected a Camera, got {type(camera).__name__}")
+        _check_inputs(scene, camera)
         self.size = len(scene)
         self.camera = camera
-        rows = np.ascontiguousarray(moving, np.int64)
         self._retained = _core.RetainedRender(
-            scene.means,
-            scene.scales,
-            scene.quats,
-            scene.opacities,
-            scene.sh,
-            np.ascontiguousarray(camera.world_to_camera, dtype=np.float64),
-            camera.width,
-            camera.height,
-            camera.fx,
-            camera.fy,
-            camera.cx,
-            camera.cy,
-            rows,
+            *_core_inputs(scene, camera),
+            np.ascontiguousarray(moving, np.int64),
             background=_background(background),
             index_only=_index_only(outputs),
         )
@@ -80,13 +65,4 @@ class FrameRenderer:
             np.ascontiguousarray(scales, np.float32),
             np.ascontiguousarray(quats, np.float32),
         )
-        return RenderResult(
-            rgb=raw.rgb,
-            alpha=raw.alpha,
-            depth=raw.depth,
-            index=raw.index,
-            index_depth=raw.index_depth,
-            timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
-            n_visible=raw.n_visible,
-            n_tile_pairs=raw.n_tile_pairs,
-        )
+        return RenderResult.from_core(raw)

@@ -53,6 +53,13 @@ class RenderResult:
     n_visible: int = 0
     n_tile_pairs: int = 0
 
+    @classmethod
+    def from_core(cls, raw: _core.Rendered) -> RenderResult:
+        """The result of a core render (`_core.rasterize`, `RetainedRender.frame`)."""
+        return cls(rgb=raw.rgb, alpha=raw.alpha, depth=raw.depth, index=raw.index, index_depth=raw.index_depth,
+                   timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
+                   n_visible=raw.n_visible, n_tile_pairs=raw.n_tile_pairs)  # fmt: skip
+
     @property
     def rgb_image(self) -> np.ndarray:
         """`rgb`, or an error where the render has no colour (made with `outputs="index"`)."""
@@ -90,10 +97,7 @@ def render(
         CameraError: `camera` is not a Camera.
         SketchRodGSError: a bad `background` or `outputs`, or arrays the renderer refuses.
     """
-    if not isinstance(scene, GaussianScene):
-        raise SketchRodGSError(f"scene: expected a GaussianScene, got {type(scene).__name__}")
-    if not isinstance(camera, Camera):
-        raise CameraError(f"camera: expected a Camera, got {type(camera).__name__}")
+    _check_inputs(scene, camera)
     bg = _background(background)
     index_only = _index_only(outputs)
     if tiles is not None:
@@ -101,33 +105,27 @@ def render(
         if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
             raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
         tiles = np.ascontiguousarray(tiles != 0)
-    raw = _core.rasterize(
-        scene.means,
-        scene.scales,
-        scene.quats,
-        scene.opacities,
-        scene.sh,
-        np.ascontiguousarray(camera.world_to_camera, dtype=np.float64),
-        camera.width,
-        camera.height,
-        camera.fx,
-        camera.fy,
-        camera.cx,
-        camera.cy,
-        background=bg,
-        index_only=index_only,
-        tiles=tiles,
-    )
-    return RenderResult(
-        rgb=raw.rgb,
-        alpha=raw.alpha,
-        depth=raw.depth,
-        index=raw.index,
-        index_depth=raw.index_depth,
-        timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
-        n_visible=raw.n_visible,
-        n_tile_pairs=raw.n_tile_pairs,
-    )
+    raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, index_only=index_only, tiles=tiles)
+    return RenderResult.from_core(raw)
+
+
+def _check_inputs(scene: GaussianScene, camera: Camera) -> None:
+    if not isinstance(scene, GaussianScene):
+        raise SketchRodGSError(f"scene: expected a GaussianScene, got {type(scene).__name__}")
+    if not isinstance(camera, Camera):
+        raise CameraError(f"camera: expected a Camera, got {type(camera).__name__}")
+
+
+_CoreInputs = tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int, float, float, float, float
+]
+
+
+def _core_inputs(scene: GaussianScene, camera: Camera) -> _CoreInputs:
+    """The scene's arrays and the camera as the core's renderers take them."""
+    w2c = np.ascontiguousarray(camera.world_to_camera, dtype=np.float64)
+    return (scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, w2c, camera.width, camera.height,
+            camera.fx, camera.fy, camera.cx, camera.cy)  # fmt: skip
 
 
 TILE_SIZE = 16

@@ -209,10 +209,14 @@ def _float_vertex_table(path: str | os.PathLike[str]):
 def _check_body(path: str | os.PathLike[str], data: plyfile.PlyData) -> None:
     """What plyfile lets pass: rows past the header's counts, and an ASCII file cut inside a number."""
     with open(path, "rb") as stream:
-        raw = stream.read()
-    end = raw.find(b"end_header")
-    start = raw.index(b"\n", end) + 1 if end >= 0 and b"\n" in raw[end:] else len(raw)
-    body = raw[start:]
+        head = stream.read(_HEADER_LIMIT)
+        size = os.fstat(stream.fileno()).st_size
+        end = head.find(b"end_header")
+        start = head.index(b"\n", end) + 1 if end >= 0 and b"\n" in head[end:] else size
+        body = b""
+        if data.text:  # only an ASCII body is read again (its rows are counted); a binary one is measured
+            stream.seek(start)
+            body = stream.read()
     if data.text:
         if body and not body[-1:].isspace():
             raise SceneFormatError(
@@ -234,9 +238,9 @@ def _check_body(path: str | os.PathLike[str], data: plyfile.PlyData) -> None:
     ]
     if all(all(sizes_) for sizes_ in sizes):  # fixed-size rows only
         expected = sum(element.count * sum(row) for element, row in zip(data.elements, sizes))
-        if len(body) > expected:
+        if size - start > expected:
             raise SceneFormatError(
-                f"{path}: {len(body) - expected} bytes after the last row the header declares "
+                f"{path}: {size - start - expected} bytes after the last row the header declares "
                 "(its counts are below the data)"
             )
 

@@ -1,7 +1,10 @@
 //! Bindings for `sketchrodgs-raster`: `_core.rasterize(...)`.
 
 use numpy::ndarray::{Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use sketchrodgs_raster::{Camera, RasterError, RenderMode, RenderOptions, RenderOutput, Retained, Splats, TileMask};
 
@@ -41,25 +44,9 @@ fn rasterize<'py>(
     index_only: bool,
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<Rendered> {
-    let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
-    let (opacities, sh, w2c) = (opacities.try_readonly()?, sh.try_readonly()?, world_to_camera.try_readonly()?);
-    let n = means.shape()[0];
-    check_shape("means", means.shape(), &[None, Some(3)])?;
-    check_shape("scales", scales.shape(), &[Some(n), Some(3)])?;
-    check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
-    check_shape("opacities", opacities.shape(), &[Some(n)])?;
-    check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
-    check_shape("world_to_camera", w2c.shape(), &[Some(4), Some(4)])?;
-    let splats = Splats::from_flat(
-        contiguous(&means, "means")?,
-        contiguous(&scales, "scales")?,
-        contiguous(&quats, "quats")?,
-        contiguous(&opacities, "opacities")?,
-        contiguous(&sh, "sh")?,
-        sh.shape()[1],
-    )
-    .map_err(raster_err)?;
-    let camera = camera_of(contiguous(&w2c, "world_to_camera")?, width, height, fx, fy, cx, cy);
+    let scene = SceneInput::new(means, scales, quats, opacities, sh)?;
+    let splats = scene.splats()?;
+    let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
     let options = options_of(background, index_only);
 
     let mask = match tiles {
@@ -79,12 +66,64 @@ fn rasterize<'py>(
     into_rendered(py, out)
 }
 
-fn camera_of(w2c: &[f64], width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Camera {
+/// The scene arrays as Python passes them (see `rasterize`), borrowed read-only, shapes checked.
+struct SceneInput<'py> {
+    means: PyReadonlyArray2<'py, f32>,
+    scales: PyReadonlyArray2<'py, f32>,
+    quats: PyReadonlyArray2<'py, f32>,
+    opacities: PyReadonlyArray1<'py, f32>,
+    sh: PyReadonlyArray3<'py, f32>,
+}
+
+impl<'py> SceneInput<'py> {
+    fn new(
+        means: &Bound<'py, PyArray2<f32>>,
+        scales: &Bound<'py, PyArray2<f32>>,
+        quats: &Bound<'py, PyArray2<f32>>,
+        opacities: &Bound<'py, PyArray1<f32>>,
+        sh: &Bound<'py, PyArray3<f32>>,
+    ) -> PyResult<Self> {
+        let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
+        let (opacities, sh) = (opacities.try_readonly()?, sh.try_readonly()?);
+        let n = means.shape()[0];
+        check_shape("means", means.shape(), &[None, Some(3)])?;
+        check_shape("scales", scales.shape(), &[Some(n), Some(3)])?;
+        check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
+        check_shape("opacities", opacities.shape(), &[Some(n)])?;
+        check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
+        Ok(Self { means, scales, quats, opacities, sh })
+    }
+
+    fn splats(&self) -> PyResult<Splats<'_>> {
+        Splats::from_flat(
+            contiguous(&self.means, "means")?,
+            contiguous(&self.scales, "scales")?,
+            contiguous(&self.quats, "quats")?,
+            contiguous(&self.opacities, "opacities")?,
+            contiguous(&self.sh, "sh")?,
+            self.sh.shape()[1],
+        )
+        .map_err(raster_err)
+    }
+}
+
+/// The camera from a (4, 4) float64 world-to-camera matrix and the intrinsics.
+fn camera_from(
+    world_to_camera: &Bound<'_, PyArray2<f64>>,
+    width: u32,
+    height: u32,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+) -> PyResult<Camera> {
+    let w2c = world_to_camera.try_readonly()?;
+    check_shape("world_to_camera", w2c.shape(), &[Some(4), Some(4)])?;
     let mut matrix = [[0.0f64; 4]; 4];
-    for (row, values) in matrix.iter_mut().zip(w2c.chunks_exact(4)) {
+    for (row, values) in matrix.iter_mut().zip(contiguous(&w2c, "world_to_camera")?.chunks_exact(4)) {
         row.copy_from_slice(values);
     }
-    Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix }
+    Ok(Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix })
 }
 
 fn options_of(background: (f32, f32, f32), index_only: bool) -> RenderOptions {
@@ -126,31 +165,16 @@ impl RetainedRender {
         background: (f32, f32, f32),
         index_only: bool,
     ) -> PyResult<Self> {
-        let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
-        let (opacities, sh, w2c, moving) =
-            (opacities.try_readonly()?, sh.try_readonly()?, world_to_camera.try_readonly()?, moving.try_readonly()?);
-        let n = means.shape()[0];
-        check_shape("means", means.shape(), &[None, Some(3)])?;
-        check_shape("scales", scales.shape(), &[Some(n), Some(3)])?;
-        check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
-        check_shape("opacities", opacities.shape(), &[Some(n)])?;
-        check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
-        check_shape("world_to_camera", w2c.shape(), &[Some(4), Some(4)])?;
-        let splats = Splats::from_flat(
-            contiguous(&means, "means")?,
-            contiguous(&scales, "scales")?,
-            contiguous(&quats, "quats")?,
-            contiguous(&opacities, "opacities")?,
-            contiguous(&sh, "sh")?,
-            sh.shape()[1],
-        )
-        .map_err(raster_err)?;
+        let scene = SceneInput::new(means, scales, quats, opacities, sh)?;
+        let splats = scene.splats()?;
+        let n = splats.len();
+        let moving = moving.try_readonly()?;
         let rows = contiguous(&moving, "moving")?
             .iter()
             .map(|&r| u32::try_from(r).ok().filter(|&r| (r as usize) < n))
             .collect::<Option<Vec<u32>>>()
             .ok_or_else(|| SketchRodGSError::new_err(format!("moving: rows must be in 0..{n}")))?;
-        let camera = camera_of(contiguous(&w2c, "world_to_camera")?, width, height, fx, fy, cx, cy);
+        let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
         let options = options_of(background, index_only);
         let retained = run_parallel(py, "RetainedRender", || Retained::new(&splats, &camera, &options, &rows))?
             .map_err(raster_err)?;

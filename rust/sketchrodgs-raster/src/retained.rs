@@ -115,11 +115,6 @@ impl Retained {
         Ok(retained)
     }
 
-    /// The scene rows that may move.
-    pub fn moving(&self) -> &[u32] {
-        &self.moving
-    }
-
     /// [`Retained::frame`] from flat row-major arrays (means and scales N*3, quats N*4).
     pub fn frame_flat(&mut self, means: &[f32], scales: &[f32], quats: &[f32]) -> Result<&RenderOutput, RasterError> {
         let rows = |name: &'static str, width: usize, len: usize| RasterError::LengthMismatch {
