@@ -272,9 +272,10 @@ def test_bad_strokes_are_clear_errors(straight_scene, stroke, error, message):
             "edge_length: 1e-09 would make .* at most 100,000: give a larger edge_length",
         ),
         ({"radius": 0.01, "edge_length": 1e-300}, "edge_length: 1e-300 would make .*e\\+.* vertices"),
-        ({"radius": 0.01, "smoothing_iterations": 10**9}, "smoothing_iterations: must be a whole number in 0..1000"),
-        ({"radius": 0.01, "smoothing_iterations": -1}, "smoothing_iterations"),
-        ({"radius": 0.01, "smoothing_iterations": 2.5}, "smoothing_iterations"),
+        ({"radius": 0.01, "smoothing": 1e9}, "smoothing: must be a number of radii in 0..100"),
+        ({"radius": 0.01, "smoothing": -1}, "smoothing"),
+        ({"radius": 0.01, "smoothing": float("nan")}, "smoothing"),
+        ({"radius": 0.01, "smoothing": "3"}, "smoothing"),
     ],
 )
 def test_bad_parameters_are_clear_errors(straight_scene, kwargs, message):

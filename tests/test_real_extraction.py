@@ -24,11 +24,13 @@ JITTER = 10
 MISSES = {
     "cross_given": {"plant_main_stem", "plant_side_stem_long", "plant_side_stem_right", "tree_branch_tall"},
     "cross_estimated": {
+        "donut_sprinkle_a",
+        "donut_sprinkle_b",
+        "guitar_stand_leg_right",
         "plant_main_stem",
         "plant_side_stem_long",
         "plant_side_stem_right",
         "tree_branch_tall",
-        "guitar_stand_leg_right",
     },
     "jitter": {
         "donut_sprinkle_a",
@@ -40,21 +42,9 @@ MISSES = {
         "plant_side_stem_left",
         "plant_side_stem_long",
         "plant_side_stem_right",
-        "tree_branch_lower_left",
         "tree_branch_tall",
     },
-    "radius": {
-        "donut_sprinkle_a",
-        "donut_sprinkle_b",
-        "guitar_neck",
-        "guitar_stand_foot_front",
-        "guitar_stand_leg_left",
-        "guitar_stand_leg_right",
-        "plant_main_stem",
-        "plant_side_stem_long",
-        "plant_side_stem_right",
-        "tree_twig_v",
-    },
+    "radius": {"donut_sprinkle_b", "guitar_stand_leg_left", "guitar_stand_leg_right", "plant_main_stem"},
 }
 
 

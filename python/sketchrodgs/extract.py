@@ -26,9 +26,9 @@ from .render import RenderResult
 from .rod import MAX_ROD_VERTICES
 from .scene import GaussianScene
 
-DEFAULT_SMOOTHING_ITERATIONS = 10
+DEFAULT_SMOOTHING = 1.0  # radii (polyline.smooth_axis)
+MAX_SMOOTHING = 100.0  # far past any use: the axis is a straight line long before
 _SMALLEST = float(np.finfo(np.float32).tiny)  # lengths go to Rust as float32
-MAX_SMOOTHING_ITERATIONS = 1000  # far past any use: smoothing converges to a straight line
 # A path Gaussian's centre must project within this many pixels, or radii, of its path pixel.
 _NEAR_PIXEL_PX = 3.0
 _NEAR_PIXEL_RADII = 2.0
@@ -238,7 +238,7 @@ def extract_rod(
     alpha: float = 1.0,
     band_px: float | None = None,
     edge_length: float | None = None,
-    smoothing_iterations: int = DEFAULT_SMOOTHING_ITERATIONS,
+    smoothing: float = DEFAULT_SMOOTHING,
     segment_scale: float = sg.DEFAULT_GROW,
     attach: bool = True,
     attach_size: float | None = None,
@@ -254,9 +254,11 @@ def extract_rod(
         radius: R, the object's radius in world units. When None it is estimated from the object's
             visible width across the stroke (`estimate_radius`).
         alpha: weight of the stroke-distance term of the path cost (paper Eq. 1).
-        band_px: half-width of the band around the stroke (default 1 % of the image width).
+        band_px: half-width of the band around the stroke (default 1 % of the image width, or 1.25 R
+            in pixels at the stroke's depth where that is wider).
         edge_length: polyline spacing (default from R and the object's length).
-        smoothing_iterations: Laplacian smoothing steps before resampling (ends fixed).
+        smoothing: how smooth the axis is, in radii (`polyline.smooth_axis`): bends shorter than
+            about 2 pi `smoothing` R are smoothed out; 0 keeps the recentred points as they are.
         segment_scale: the part's cross-section reaches `segment_scale * R` from the axis (grown
             from the axis over neighbouring Gaussians; docs/deformation.md, "Segmentation").
         attach: small parts attached to the part (a leaf, a tag) ride rigidly with the rod.
@@ -289,13 +291,11 @@ def extract_rod(
     if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
         raise SketchRodGSError(f"edge_length: must be finite and > 0, got {edge_length}")
     if (
-        isinstance(smoothing_iterations, bool)
-        or not isinstance(smoothing_iterations, (int, np.integer))
-        or not 0 <= smoothing_iterations <= MAX_SMOOTHING_ITERATIONS
+        isinstance(smoothing, bool)
+        or not isinstance(smoothing, (int, float, np.integer, np.floating))
+        or not 0 <= smoothing <= MAX_SMOOTHING
     ):
-        raise SketchRodGSError(
-            f"smoothing_iterations: must be a whole number in 0..{MAX_SMOOTHING_ITERATIONS}, got {smoothing_iterations!r}"
-        )
+        raise SketchRodGSError(f"smoothing: must be a number of radii in 0..{MAX_SMOOTHING:g}, got {smoothing!r}")
 
     partial = None
     if render is None:
@@ -344,7 +344,7 @@ def extract_rod(
     if recentre:
         nearby = scene.means[pl.near_box(points, scene.means, 2.5 * radius)]
         points = pl.recentre(points, nearby, radius)
-    points = pl.laplacian_smooth(points, smoothing_iterations)
+    points = pl.smooth_axis(points, radius, smoothing)
     length = pl.polyline_length(points)
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
     _check_vertex_count("edge_length", length, spacing, spacing, MAX_ROD_VERTICES)

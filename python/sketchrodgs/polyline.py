@@ -9,8 +9,15 @@ they take about a millisecond instead of tens. Shapes are in the docstrings.
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
+from scipy.sparse import linalg as splinalg
 
 from . import _core
+
+# The axis is fitted this many times, each with weights from the last fit's residuals (Tukey's
+# biweight, zero past `_TUKEY_RADII` radii).
+_ROBUST_FITS = 4
+_TUKEY_RADII = 1.5
 
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
@@ -72,6 +79,40 @@ def _straighten_ends(axis: np.ndarray, surface: np.ndarray, radius: float) -> np
         along = (surface[ends] - axis[anchor]) @ t[anchor]
         axis[ends] = axis[anchor] + along[:, None] * t[anchor]
     return axis
+
+
+def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.ndarray:
+    """Smooth a recentred axis: a Whittaker smoother with a third-difference penalty over the points
+    (taken as evenly spaced along the arc), fitted again with Tukey weights from the residuals so
+    that a cross-section pulled aside by what touches the part (a leaf at a node, a body at an end)
+    does not bend the axis. The third difference leaves circular arcs alone, ends included (a
+    curvature penalty would straighten the last radii of a bent part).
+
+    Args:
+        points: (M, 3) axis points in order, about R/2 apart.
+        radius: R, the object's radius.
+        length: the smoothing length in radii: bends much shorter than 2 pi `length` R are smoothed
+            out. 0: no smoothing.
+
+    Returns:
+        (M, 3) float64.
+    """
+    points = np.asarray(points, np.float64)
+    n = len(points)
+    spacing = polyline_length(points) / max(n - 1, 1)
+    if length <= 0 or n < 5 or not spacing > 0:
+        return points.copy()
+    # the penalty passes wavenumbers below about 1 / (length / spacing) per sample
+    lam = (length * radius / spacing) ** 6
+    third = sparse.diags([-1.0, 3.0, -3.0, 1.0], [0, 1, 2, 3], shape=(n - 3, n))
+    penalty = lam * (third.T @ third)
+    weights = np.ones(n)
+    fit = points
+    for _ in range(_ROBUST_FITS):
+        fit = splinalg.spsolve((sparse.diags(weights) + penalty).tocsc(), weights[:, None] * points)
+        residual = np.linalg.norm(points - fit, axis=1) / (_TUKEY_RADII * radius)
+        weights = np.where(residual < 1, (1 - residual**2) ** 2, 0.0) + 1e-3
+    return np.asarray(fit, np.float64)
 
 
 def near_box(polyline: np.ndarray, centres: np.ndarray, margin: float) -> np.ndarray:

@@ -207,7 +207,9 @@ pub struct TraceParams {
     /// `alpha`: weight of the squared distance to the stroke in Eq. 1. Default 1.
     pub stroke_weight: f64,
     /// `b`: half-width in pixels of the band around the stroke that the path may use.
-    /// Default: 1 % of the image width (use [`TraceParams::default_band_px`]); 0 here means that.
+    /// 0 here means the default: 1 % of the image width, or 1.25 `R` in pixels at the stroke's depth
+    /// where that is wider, so that a stroke anywhere over a thick part reaches its middle
+    /// ([`TraceParams::default_band_px`]).
     pub band_px: f32,
     /// A stroke vertex this close (pixels) to a path found so far counts as covered. Default 10.
     pub cover_px: f32,
@@ -224,12 +226,15 @@ impl Default for TraceParams {
 }
 
 impl TraceParams {
-    /// The default band half-width for an image `width` pixels wide: 1 % of the width, at least 2 px.
-    pub fn default_band_px(width: usize) -> f32 {
-        (0.01 * width as f32).max(2.0)
+    /// The default band half-width for an image `width` pixels wide: 1 % of the width, at least 2 px,
+    /// and at least `BAND_RADII` times the part's radius in pixels (`radius_px`, 0 when unknown).
+    pub fn default_band_px(width: usize, radius_px: f32) -> f32 {
+        (0.01 * width as f32).max(2.0).max(BAND_RADII * radius_px)
     }
 
-    fn validated(&self, width: usize) -> Result<Self, PathError> {
+    /// The parameters checked, with the default band filled in (`radius_px`: the part's radius in
+    /// pixels at the stroke's depth, 0 when unknown).
+    fn validated(&self, width: usize, radius_px: f32) -> Result<Self, PathError> {
         let check = |name: &'static str, value: f64| {
             if value.is_finite() && value > 0.0 { Ok(()) } else { Err(PathError::BadParameter { name, value }) }
         };
@@ -241,29 +246,38 @@ impl TraceParams {
         if !(self.stroke_weight.is_finite() && self.stroke_weight >= 0.0) {
             return Err(PathError::BadParameter { name: "stroke_weight", value: self.stroke_weight });
         }
-        let band_px = if self.band_px == 0.0 { Self::default_band_px(width) } else { self.band_px };
+        let band_px = if self.band_px == 0.0 { Self::default_band_px(width, radius_px) } else { self.band_px };
         check("band_px", f64::from(band_px))?;
         Ok(Self { band_px, ..*self })
     }
 }
 
+/// The default band reaches this many radii (in pixels) from the stroke, where that is wider than 1 %
+/// of the image: a stroke drawn anywhere over a thick part then still reaches its middle.
+const BAND_RADII: f32 = 1.25;
+
 /// Depth gaps under this many pixels' world size are never taken for an occlusion: the centres of
 /// a real capture's Gaussians scatter in depth by a few pixels, whatever the part's radius.
-const GAP_FLOOR_PX: f32 = 8.0;
+pub(crate) const GAP_FLOOR_PX: f32 = 8.0;
 
 /// The depth gap that separates surfaces: `3R`, but at least `GAP_FLOOR_PX` pixels' world size at
 /// the median depth under the stroke (when the focal length is known).
 pub(crate) fn depth_gap(image: &IndexImage, stroke: &[[f32; 2]], radius: f32, focal_px: f32) -> f32 {
+    match depth_under(image, stroke) {
+        Some(z) if focal_px > 0.0 => (3.0 * radius).max(GAP_FLOOR_PX * z / focal_px),
+        _ => 3.0 * radius,
+    }
+}
+
+/// The median depth of the object under the stroke's points, if any is on it.
+pub(crate) fn depth_under(image: &IndexImage, stroke: &[[f32; 2]]) -> Option<f32> {
     let mut under: Vec<f32> = stroke
         .iter()
         .filter_map(|p| image.pixel_at(p[0], p[1]))
         .filter(|&q| image.id_at(q) >= 0)
         .map(|q| image.depth(q))
         .collect();
-    if focal_px <= 0.0 || under.is_empty() {
-        return 3.0 * radius;
-    }
-    (3.0 * radius).max(GAP_FLOOR_PX * width::median(&mut under) / focal_px)
+    (!under.is_empty()).then(|| width::median(&mut under))
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
     if !(focal.is_finite() && focal > 0.0) {
         return Err(PathError::BadParameter { name: "focal_px", value: f64::from(focal) });
     }
-    let band_px = if params.band_px > 0.0 { params.band_px } else { TraceParams::default_band_px(image.width) };
+    let band_px = if params.band_px > 0.0 { params.band_px } else { TraceParams::default_band_px(image.width, 0.0) };
     let max_px = image.width.max(image.height) / 8;
     // pass 1: a loose clean-up (any depth) only to get the resampled, smoothed samples
     let loose = clean_stroke(image, stroke, band_px, f32::INFINITY, 0.0, None)?;

@@ -50,7 +50,11 @@ pub fn trace_stroke(
     stroke: &[[f32; 2]],
     params: &TraceParams,
 ) -> Result<Trace, PathError> {
-    let params = params.validated(image.width)?;
+    let radius_px = match crate::depth_under(image, stroke) {
+        Some(z) if z > 0.0 && params.focal_px > 0.0 => params.radius * params.focal_px / z,
+        _ => 0.0,
+    };
+    let params = params.validated(image.width, radius_px)?;
     let id = image.max_id();
     if id >= 0 && id as usize >= centres.len() {
         return Err(PathError::IndexOutOfRange { id, count: centres.len() });
@@ -70,6 +74,7 @@ pub fn trace_stroke(
     let mut search = Search::new(image, centres, &band, &clean, &params, gap);
     let mut covered = CoverMask::new(image.width, image.height, params.cover_px);
     let mut pieces = Vec::new();
+    let mut start_sample = 0; // the chain sample each piece starts from: it moves on every time
     loop {
         let (end_node, reached) = search.run(start, goal);
         let pixels = search.path_to(end_node);
@@ -87,8 +92,8 @@ pub fn trace_stroke(
         if reached {
             break;
         }
-        match resume_point(image, &band, &clean, &covered, start, params.band_px) {
-            Some(next) => start = next,
+        match resume_point(image, &band, &clean, &covered, start, start_sample, params.band_px) {
+            Some((sample, node)) => (start_sample, start) = (sample, node),
             None => break,
         }
     }
@@ -120,23 +125,26 @@ fn snap(image: &IndexImage, band: &Band, point: [f32; 2], arc: f32, radius: f32)
     best.map(|(_, p)| p)
 }
 
-/// After a piece that started at node `start` is lost: the first sample on the stroke's depth chain
-/// past that start that no path covers yet (paper, "Occlusion"; the chain already skips samples
-/// over occluders). Counting from the start, not from the furthest pixel reached, matters where the
-/// stroke crosses itself: a pixel at the crossing can belong to the later pass.
+/// After a piece that started at node `start` (from chain sample `start_sample`) is lost: the first
+/// sample on the stroke's depth chain past that start that no path covers yet, and its node (paper,
+/// "Occlusion"; the chain already skips samples over occluders). Counting from the start, not from
+/// the furthest pixel reached, matters where the stroke crosses itself: a pixel at the crossing can
+/// belong to the later pass. The sample is always a later one than `start_sample`, so the loop ends
+/// even where a piece does not cover its own sample (a band wider than `cover_px`).
 fn resume_point(
     image: &IndexImage,
     band: &Band,
     stroke: &CleanStroke,
     covered: &CoverMask,
     start: usize,
+    start_sample: usize,
     band_px: f32,
-) -> Option<usize> {
+) -> Option<(usize, usize)> {
     let arc = band.arc[start];
-    (0..stroke.points.len())
+    (start_sample + 1..stroke.points.len())
         .filter(|&j| stroke.arc[j] > arc && stroke.anchor[j].is_some())
         .filter(|&j| !covered.contains(stroke.points[j]))
-        .find_map(|j| snap(image, band, stroke.points[j], stroke.arc[j], band_px))
+        .find_map(|j| snap(image, band, stroke.points[j], stroke.arc[j], band_px).map(|node| (j, node)))
 }
 
 fn pixel_xy(image: &IndexImage, p: usize) -> [u32; 2] {

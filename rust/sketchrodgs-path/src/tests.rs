@@ -96,6 +96,22 @@ fn an_occluding_pole_splits_the_path_and_it_resumes_behind() {
 }
 
 #[test]
+fn a_band_wider_than_the_cover_distance_still_ends() {
+    // A rope broken by a gap; in the gap a small blob 13 px off the stroke is the only surface. With
+    // a 16 px band the search resumes on the blob, whose piece is too far from its stroke sample to
+    // cover it: the next resume must move on along the stroke, not start from the blob again.
+    let scene = Synthetic::new(80, 40, FOCAL, |col, row| {
+        let rope = row == 20 && (col <= 30 || col >= 60);
+        let blob = row == 33 && (45..=46).contains(&col);
+        (rope || blob).then_some(5.0)
+    });
+    let params = TraceParams { radius: 0.05, band_px: 16.0, focal_px: FOCAL, ..TraceParams::default() };
+    let trace = trace_stroke(&scene.image(), &scene.centres, &[[1.5, 20.5], [78.5, 20.5]], &params).unwrap();
+    assert_eq!(trace.pieces.last().unwrap().end, PieceEnd::Goal);
+    assert!(trace.pieces.len() <= 4, "{} pieces", trace.pieces.len());
+}
+
+#[test]
 fn the_path_does_not_jump_across_a_depth_gap_onto_an_occluder() {
     // Same pole, but a stroke whose straight line would be cheapest across it.
     let scene =
@@ -289,4 +305,50 @@ fn the_radius_is_half_the_visible_width() {
         estimate_radius(&scene.image(), &[[2.5, 20.5], [77.5, 20.5]], &unknown_focal),
         Err(PathError::BadParameter { name: "focal_px", .. })
     ));
+}
+
+#[test]
+fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
+    // A bar 15 px wide (rows 13..=27) whose depth rises by 2 px of world size per pixel across it
+    // (seen at about 63 degrees), with the centres scattered in depth by up to 12 px, in front of a
+    // wall 40 px behind: the width is the bar's, not a few pixels (a limit on the depth's slope from
+    // the start would stop after 2-3 pixels) and not the wall's.
+    let per_px = 5.0 / FOCAL;
+    let scene = Synthetic::new(80, 40, FOCAL, |col, row| {
+        let scatter = [0.0, 12.0, -6.0, 9.0, -12.0, 3.0][(col * 7 + row * 3) % 6];
+        Some(if (13..=27).contains(&row) { 5.0 + (2.0 * (row as f32 - 13.0) + scatter) * per_px } else { 7.5 })
+    });
+    let image = scene.image();
+    for col in [20, 40, 60] {
+        let width = crate::width::cross_width(&image, 20 * 80 + col, [0.0, 1.0], FOCAL, 30);
+        assert!((13..=17).contains(&width), "col {col}: width {width}");
+    }
+}
+
+#[test]
+fn a_part_in_front_of_a_surface_close_behind_measures_alone() {
+    // A 5 px rope 10 px of world size in front of a wall: they are separate surfaces.
+    let scene = Synthetic::new(80, 40, FOCAL, |_, row| {
+        Some(if (18..=22).contains(&row) { 5.0 } else { 5.0 + 10.0 * 5.0 / FOCAL })
+    });
+    let width = crate::width::cross_width(&scene.image(), 20 * 80 + 40, [0.0, 1.0], FOCAL, 30);
+    assert_eq!(width, 5);
+}
+
+#[test]
+fn a_stroke_wandering_off_a_thick_part_within_its_radius_stays_on_it() {
+    // A thick rope (rows 25..=45, radius 10.5 px); mid-way the stroke bows to 7.5 px above its upper
+    // edge for 16 px. The default band is 1.25 R in pixels here (13 px), not 1 % of the 80 px image
+    // (2 px), so the band still holds the rope there and the path is one piece.
+    assert_eq!(TraceParams::default_band_px(80, 10.4), 13.0);
+    assert!((TraceParams::default_band_px(960, 1.0) - 9.6).abs() < 1e-5);
+    let scene = Synthetic::new(80, 60, FOCAL, |_, row| (25..=45).contains(&row).then_some(5.0));
+    let stroke = [[2.5, 35.5], [26.5, 35.5], [32.5, 17.5], [48.5, 17.5], [54.5, 35.5], [77.5, 35.5]];
+    let params = TraceParams { radius: 10.4 * 5.0 / FOCAL, focal_px: FOCAL, ..TraceParams::default() };
+    let trace = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
+    assert_eq!(trace.pieces.len(), 1);
+    assert_eq!(trace.pieces[0].end, PieceEnd::Goal);
+    // with a band of 2 px the path loses the rope where the stroke leaves it
+    let narrow = TraceParams { band_px: 2.0, ..params };
+    assert!(trace_stroke(&scene.image(), &scene.centres, &stroke, &narrow).unwrap().pieces.len() > 1);
 }

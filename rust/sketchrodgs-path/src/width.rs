@@ -1,42 +1,62 @@
-//! The object's width across the stroke (docs/extraction.md, "Radius" and "Staying on the part"):
-//! from a pixel, walk both ways along the stroke's normal while the surface continues. It
-//! continues while the pixel is covered (alpha >= 0.5 where alpha is known) and its depth stays
-//! within 1.5 times the lateral distance walked of the start's depth (a single stray pixel is
-//! skipped): a cylinder's depth rises by less than
-//! the lateral offset until its silhouette, where the scene behind (or the body a sprinkle sits on)
-//! jumps away. A flat leaf or body facing the camera continues, so it measures wide.
+//! The object's width across the stroke (docs/extraction.md, "Widths"): from a pixel, walk both
+//! ways along the stroke's normal over covered pixels (alpha >= 0.5 where alpha is known; one
+//! failing pixel is stepped over), then keep the depth cluster of the start: the walked depths
+//! split wherever consecutive values are more than `GAP_FLOOR_PX` pixels' world size apart. The
+//! width is the run of pixels around the start that lie in that cluster. A round part's surface
+//! and a flat bar seen obliquely (whose depth rises steadily across it, with the scatter of real
+//! Gaussian centres) stay in one cluster; the scene behind the silhouette is a cluster of its own.
+//! A leaf or body facing the camera at the part's depth continues, so it measures wide.
 
-use crate::IndexImage;
+use crate::{GAP_FLOOR_PX, IndexImage};
 
-/// Depth noise allowance, in pixels of lateral distance (Gaussian centres scatter about the surface).
-const NOISE_PX: f32 = 2.0;
-/// The depth may differ from the start's by this many times the lateral distance walked: a round
-/// part's surface stays within 1 until its silhouette; Gaussian centres scatter past that.
-const SLOPE: f32 = 1.5;
-/// This many failing pixels in a row end the walk.
+/// This many failing pixels in a row end a walk.
 const MAX_MISSES: usize = 1;
+/// A pixel more than this many depth gaps from every depth its walk has seen fails: the walk ends
+/// at the scene behind a silhouette instead of crossing it. Centres on one surface scatter by less.
+const FAR_GAPS: f32 = 3.0;
 
 /// Width in pixels of the surface at pixel `p` across the unit direction `normal`, walking at most
 /// `max_px` each way (then the width is `2 * max_px + 1`).
 pub(crate) fn cross_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, max_px: usize) -> usize {
     let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
     let z0 = image.depth(p);
-    let per_px = z0 / focal_px;
-    let mut width = 1;
-    for sign in [1.0_f32, -1.0] {
-        let (mut run, mut misses) = (0, 0);
+    let gap = GAP_FLOOR_PX * z0 / focal_px;
+    let far = FAR_GAPS * gap;
+    // each way: the depth of every pixel walked, None where it fails
+    let walks = [1.0_f32, -1.0].map(|sign| {
+        let mut walk: Vec<Option<f32>> = Vec::new();
+        let (mut low, mut high, mut misses) = (z0, z0, 0);
         for k in 1..=max_px {
             let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
             let Some(q) = image.pixel_at(x, y) else { break };
             if !image.known(q) {
                 // not rendered (a render of the band only): walk on, so that one more render
                 // holds all this walk can read; this result is discarded
+                walk.push(None);
                 continue;
             }
-            if image.covered(q) && (image.depth(q) - z0).abs() <= (SLOPE * k as f32).max(NOISE_PX) * per_px {
-                (run, misses) = (k, 0);
+            let z = image.depth(q);
+            if image.covered(q) && z >= low - far && z <= high + far {
+                walk.push(Some(z));
+                (low, high, misses) = (low.min(z), high.max(z), 0);
             } else {
-                // one stray Gaussian (a centre far off the surface) does not end the surface
+                walk.push(None);
+                misses += 1;
+                if misses > MAX_MISSES {
+                    break;
+                }
+            }
+        }
+        walk
+    });
+    let (low, high) = depth_cluster(z0, || walks.iter().flatten().flatten().copied(), gap);
+    let mut width = 1;
+    for walk in &walks {
+        let (mut run, mut misses) = (0, 0);
+        for (k, z) in walk.iter().enumerate() {
+            if z.is_some_and(|z| (low..=high).contains(&z)) {
+                (run, misses) = (k + 1, 0);
+            } else {
                 misses += 1;
                 if misses > MAX_MISSES {
                     break;
@@ -46,6 +66,26 @@ pub(crate) fn cross_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_
         width += run;
     }
     width
+}
+
+/// The range of the cluster of `depths` that holds `start`: the values reachable from it in steps
+/// of at most `gap` (as if sorted and split where neighbours are more than `gap` apart). Grown by
+/// passes over the values, which are few and mostly in walking order, instead of a sort.
+fn depth_cluster<I: Iterator<Item = f32>>(start: f32, depths: impl Fn() -> I, gap: f32) -> (f32, f32) {
+    let (mut low, mut high) = (start, start);
+    loop {
+        let mut grew = false;
+        for z in depths() {
+            if z < low && low - z <= gap {
+                (low, grew) = (z, true);
+            } else if z > high && z - high <= gap {
+                (high, grew) = (z, true);
+            }
+        }
+        if !grew {
+            return (low, high);
+        }
+    }
 }
 
 /// A round part is 2 radii wide; a surface wider than this many radii is not the part alone.

@@ -21,7 +21,7 @@ fn path_err(err: PathError) -> PyErr {
 /// Screen-space path under a stroke (see `sketchrodgs.extract_rod` for the public API).
 ///
 /// index (H, W) int32 and depth (H, W) float32 are the index image K and its depth Z; centres
-/// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width;
+/// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width or 1.25 R in pixels, the wider;
 /// `focal_px` is the camera's focal length in pixels (0: unknown); `alpha` (H, W) float32 or None.
 /// Returns a `Trace` (its `pieces`, `clean_stroke` and `coverage`). `rendered` (tiles, see `RenderedTiles`)
 /// says that only those 16x16 tiles were rendered; reads outside them are set in `missed`

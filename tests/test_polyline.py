@@ -1,0 +1,52 @@
+"""The axis smoothing of extraction (`polyline.smooth_axis`, docs/extraction.md, "Polyline"): it
+takes out the scatter of recentred cross-sections and a cross-section pulled aside by what touches
+the part, and keeps the part's own bends."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sketchrodgs import polyline as pl
+
+R = 0.01
+
+
+def distance_to(points: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    """Distance from each point to the nearest of `curve`'s (dense) points."""
+    return np.min(np.linalg.norm(points[:, None, :] - curve[None, :, :], axis=2), axis=1)
+
+
+def test_a_cross_section_pulled_aside_by_a_leaf_does_not_bend_the_axis():
+    # a straight axis 40 R long sampled every R/2, centroids scattered by 0.15 R; over 1 R in the
+    # middle a leaf pulls the centroids 2 R aside (a node)
+    x = np.arange(0, 40 * R, R / 2)
+    rng = np.random.default_rng(0)
+    points = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1) + rng.normal(0, 0.15 * R, (len(x), 3))
+    node = np.abs(x - 20 * R) <= R / 2
+    points[node, 1] += 2 * R
+    smoothed = pl.smooth_axis(points, R)
+    off = np.linalg.norm(smoothed[:, 1:], axis=1) / R
+    assert off[node].max() < 0.2, off[node].max()
+    # the scatter is smoothed, the ends included (they are fitted, not kept)
+    assert off.max() < 0.5 and np.median(off) < 0.1, (off.max(), np.median(off))
+    # a plain smoothing of the same length is pulled towards the leaf
+    assert np.linalg.norm(pl.laplacian_smooth(points, 10)[node, 1:], axis=1).max() / R > 0.3
+
+
+def test_the_parts_own_bends_are_kept():
+    # a quarter circle of radius 8 R (a bent twig), scattered by 0.1 R
+    angle = np.arange(0, np.pi / 2, (R / 2) / (8 * R))
+    arc = 8 * R * np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    rng = np.random.default_rng(1)
+    smoothed = pl.smooth_axis(arc + rng.normal(0, 0.1 * R, arc.shape), R)
+    dense = 8 * R * np.stack([np.cos(a := np.linspace(0, np.pi / 2, 2000)), np.sin(a), np.zeros_like(a)], axis=1)
+    error = distance_to(smoothed, dense) / R
+    assert error.mean() < 0.08 and error.max() < 0.3, (error.mean(), error.max())
+
+
+def test_no_smoothing_keeps_the_points_and_short_inputs_pass_through():
+    points = np.random.default_rng(2).normal(size=(20, 3))
+    np.testing.assert_array_equal(pl.smooth_axis(points, R, 0.0), points)
+    np.testing.assert_array_equal(pl.smooth_axis(points[:4], R), points[:4])
+    # points all in one place are no division by zero
+    assert np.isfinite(pl.smooth_axis(np.zeros((10, 3)), R)).all()
