@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from conftest import outputs_per_thread_count
 from sketchrodgs import _core
 
 SCRIPT = """
@@ -53,3 +54,22 @@ def test_a_forked_child_runs_parallel_work():
     child = os.read(read, 64).decode()
     expected = int((_core.nearest_on_polyline(line, points, 0.5)[0] >= 0).sum())
     assert status == 0 and child == str(expected)
+
+
+EXTRACT = """
+import hashlib, json, numpy as np
+from sketchrodgs import Camera, extract_rod, load_scene
+from sketchrodgs.data import sample
+case = json.load(open("tests/data/real_cases/cases.json"))["cases"][1]  # a plant side stem
+view = case["views"][0]
+ex = extract_rod(load_scene(sample("plant")), Camera.from_dict(view["camera"]), np.asarray(view["stroke"]))
+digest = hashlib.sha256()
+for array in (ex.polyline, ex.gaussian_ids, ex.binding.offset, *ex.pixel_path):
+    digest.update(np.ascontiguousarray(array).tobytes())
+print(ex.radius, digest.hexdigest())
+"""
+
+
+def test_extraction_does_not_depend_on_the_thread_count():
+    """The path search measures widths and surfaces in parallel: the rod is the same bit for bit."""
+    assert len(outputs_per_thread_count(EXTRACT, (1, 2, 3))) == 1

@@ -2,7 +2,7 @@
 //! stroke (see `width`), in world units at its depth, the median over the stroke's samples on it.
 
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{cross_width, median};
+use crate::width::{Walks, median};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// Estimate `R` from the object's visible width under `stroke`. `params.focal_px` must be > 0;
@@ -49,11 +49,12 @@ fn half_widths(
     focal: f32,
     max_px: usize,
 ) -> Option<f32> {
+    let mut walks = Walks::default();
     let mut values: Vec<f32> = pixels
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
-        .map(|(p, &n)| 0.5 * cross_width(image, p, n, focal, max_px) as f32 * image.depth(p) / focal)
+        .map(|(p, &n)| 0.5 * walks.cross_width(image, p, n, focal, max_px) as f32 * image.depth(p) / focal)
         .collect();
     (!values.is_empty()).then(|| median(&mut values))
 }

@@ -4,9 +4,11 @@
 use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashSet};
 
+use rayon::prelude::*;
+
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::excess_width;
+use crate::width::Walks;
 use crate::{IndexImage, PathError, TraceParams};
 
 /// How a piece of the path ended.
@@ -308,9 +310,10 @@ fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &
         return vec![0.0; band.len()];
     }
     (0..band.len())
-        .map(|node| {
+        .into_par_iter()
+        .map_init(Walks::default, |walks, node| {
             let p = band.pixel[node] as usize;
-            let excess = excess_width(image, p, stroke.normal[band.segment[node] as usize], focal, params.radius);
+            let excess = walks.excess_width(image, p, stroke.normal[band.segment[node] as usize], focal, params.radius);
             WIDE_WEIGHT * f64::from(excess) * f64::from(image.depth(p) / focal)
         })
         .collect()

@@ -4,7 +4,9 @@
 //! along the stroke. No single sample decides, the stroke's direction does not matter, and ends
 //! that overshoot the object (onto background or a neighbour) are trimmed instead of refused.
 
-use crate::width::{WIDE_CAP, excess_width, normals};
+use rayon::prelude::*;
+
+use crate::width::{WIDE_CAP, Walks, normals};
 use crate::{IndexImage, PathError};
 
 /// Spacing of the resampled stroke, in pixels.
@@ -92,18 +94,12 @@ pub(crate) fn clean_stroke(
         return Err(too_short(1));
     }
     let normal = normals(&points);
+    let slender = slender_radius.filter(|_| focal_px > 0.0).map(|r| (r, focal_px));
     let candidates: Vec<Vec<Candidate>> = points
-        .iter()
+        .par_iter()
         .zip(&normal)
-        .map(|(&p, &n)| {
-            surfaces_near(
-                image,
-                p,
-                n,
-                reach_px,
-                depth_gap / 3.0,
-                slender_radius.filter(|_| focal_px > 0.0).map(|r| (r, focal_px)),
-            )
+        .map_init(Walks::default, |walks, (&p, &n)| {
+            surfaces_near(image, walks, p, n, reach_px, depth_gap / 3.0, slender)
         })
         .collect();
     let chain = depth_chain(&candidates, &arc, depth_gap, focal_px);
@@ -204,6 +200,7 @@ fn arc_lengths(points: &[[f32; 2]]) -> Vec<f32> {
 /// across the stroke (direction `normal`) than the part.
 fn surfaces_near(
     image: &IndexImage,
+    walks: &mut Walks,
     point: [f32; 2],
     normal: [f32; 2],
     reach_px: f32,
@@ -225,7 +222,8 @@ fn surfaces_near(
             }
         }
     }
-    pixels.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // by depth, ties in pixel order (the order of a stable sort of the scan), as one integer key
+    pixels.sort_unstable_by_key(|&(z, _, p)| (u64::from(ordered_bits(z)) << 32) | p as u64);
     // (depth of the nearest pixel, its distance, pixel count, that pixel)
     let mut surfaces: Vec<(f32, f32, usize, usize)> = Vec::new();
     for (i, &(z, d, p)) in pixels.iter().enumerate() {
@@ -247,10 +245,16 @@ fn surfaces_near(
         .iter()
         .map(|s| {
             let near = 1.0 - 0.5 * (s.1 / reach_px.max(1.0)).min(1.0);
-            let wide = slender.map_or(0.0, |(radius, focal)| excess_width(image, s.3, normal, focal, radius));
+            let wide = slender.map_or(0.0, |(radius, focal)| walks.excess_width(image, s.3, normal, focal, radius));
             Candidate { depth: s.0, score: near * (1.0 - WIDE_SCORE * wide / WIDE_CAP), pixel: s.3 }
         })
         .collect()
+}
+
+/// The bits of `z`, flipped so that they order as `f32::total_cmp` orders the values.
+pub(crate) fn ordered_bits(z: f32) -> u32 {
+    let bits = z.to_bits();
+    if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
 }
 
 /// The chain of (sample, depth, pixel) with the largest total score whose consecutive members agree in

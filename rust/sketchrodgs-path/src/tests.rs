@@ -320,7 +320,7 @@ fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
     });
     let image = scene.image();
     for col in [20, 40, 60] {
-        let width = crate::width::cross_width(&image, 20 * 80 + col, [0.0, 1.0], FOCAL, 30);
+        let width = crate::width::Walks::default().cross_width(&image, 20 * 80 + col, [0.0, 1.0], FOCAL, 30);
         assert!((13..=17).contains(&width), "col {col}: width {width}");
     }
 }
@@ -331,7 +331,7 @@ fn a_part_in_front_of_a_surface_close_behind_measures_alone() {
     let scene = Synthetic::new(80, 40, FOCAL, |_, row| {
         Some(if (18..=22).contains(&row) { 5.0 } else { 5.0 + 10.0 * 5.0 / FOCAL })
     });
-    let width = crate::width::cross_width(&scene.image(), 20 * 80 + 40, [0.0, 1.0], FOCAL, 30);
+    let width = crate::width::Walks::default().cross_width(&scene.image(), 20 * 80 + 40, [0.0, 1.0], FOCAL, 30);
     assert_eq!(width, 5);
 }
 
@@ -351,4 +351,13 @@ fn a_stroke_wandering_off_a_thick_part_within_its_radius_stays_on_it() {
     // with a band of 2 px the path loses the rope where the stroke leaves it
     let narrow = TraceParams { band_px: 2.0, ..params };
     assert!(trace_stroke(&scene.image(), &scene.centres, &stroke, &narrow).unwrap().pieces.len() > 1);
+}
+
+#[test]
+fn depth_keys_order_as_total_cmp() {
+    let mut values = [3.0_f32, -0.0, 0.0, -2.5, f32::INFINITY, 1e-30, -1e30, 7.25, f32::NEG_INFINITY];
+    let mut keys: Vec<u32> = values.iter().map(|&z| crate::stroke::ordered_bits(z)).collect();
+    values.sort_by(f32::total_cmp);
+    keys.sort_unstable();
+    assert_eq!(keys, values.iter().map(|&z| crate::stroke::ordered_bits(z)).collect::<Vec<_>>());
 }

@@ -15,57 +15,81 @@ const MAX_MISSES: usize = 1;
 /// at the scene behind a silhouette instead of crossing it. Centres on one surface scatter by less.
 const FAR_GAPS: f32 = 3.0;
 
-/// Width in pixels of the surface at pixel `p` across the unit direction `normal`, walking at most
-/// `max_px` each way (then the width is `2 * max_px + 1`).
-pub(crate) fn cross_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, max_px: usize) -> usize {
-    let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
-    let z0 = image.depth(p);
-    let gap = GAP_FLOOR_PX * z0 / focal_px;
-    let far = FAR_GAPS * gap;
-    // each way: the depth of every pixel walked, None where it fails
-    let walks = [1.0_f32, -1.0].map(|sign| {
-        let mut walk: Vec<Option<f32>> = Vec::new();
-        let (mut low, mut high, mut misses) = (z0, z0, 0);
-        for k in 1..=max_px {
-            let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
-            let Some(q) = image.pixel_at(x, y) else { break };
-            if !image.known(q) {
-                // not rendered (a render of the band only): walk on, so that one more render
-                // holds all this walk can read; this result is discarded
-                walk.push(None);
-                continue;
-            }
-            let z = image.depth(q);
-            if image.covered(q) && z >= low - far && z <= high + far {
-                walk.push(Some(z));
-                (low, high, misses) = (low.min(z), high.max(z), 0);
-            } else {
-                walk.push(None);
-                misses += 1;
-                if misses > MAX_MISSES {
-                    break;
+/// Reusable buffers for measuring widths (one per thread): a trace measures thousands, and these
+/// keep them from allocating. Each way holds the depth of every pixel walked, NaN where it failed.
+#[derive(Debug, Default)]
+pub(crate) struct Walks {
+    ways: [Vec<f32>; 2],
+}
+
+impl Walks {
+    /// Width in pixels of the surface at pixel `p` across the unit direction `normal`, walking at
+    /// most `max_px` each way (then the width is `2 * max_px + 1`).
+    pub fn cross_width(
+        &mut self,
+        image: &IndexImage,
+        p: usize,
+        normal: [f32; 2],
+        focal_px: f32,
+        max_px: usize,
+    ) -> usize {
+        let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
+        let z0 = image.depth(p);
+        let gap = GAP_FLOOR_PX * z0 / focal_px;
+        let far = FAR_GAPS * gap;
+        for (walk, sign) in self.ways.iter_mut().zip([1.0_f32, -1.0]) {
+            walk.clear();
+            let (mut low, mut high, mut misses) = (z0, z0, 0);
+            for k in 1..=max_px {
+                let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
+                let Some(q) = image.pixel_at(x, y) else { break };
+                if !image.known(q) {
+                    // not rendered (a render of the band only): walk on, so that one more render
+                    // holds all this walk can read; this result is discarded
+                    walk.push(f32::NAN);
+                    continue;
+                }
+                let z = image.depth(q);
+                if image.covered(q) && z >= low - far && z <= high + far {
+                    walk.push(z);
+                    (low, high, misses) = (low.min(z), high.max(z), 0);
+                } else {
+                    walk.push(f32::NAN);
+                    misses += 1;
+                    if misses > MAX_MISSES {
+                        break;
+                    }
                 }
             }
         }
-        walk
-    });
-    let (low, high) = depth_cluster(z0, || walks.iter().flatten().flatten().copied(), gap);
-    let mut width = 1;
-    for walk in &walks {
-        let (mut run, mut misses) = (0, 0);
-        for (k, z) in walk.iter().enumerate() {
-            if z.is_some_and(|z| (low..=high).contains(&z)) {
-                (run, misses) = (k + 1, 0);
-            } else {
-                misses += 1;
-                if misses > MAX_MISSES {
-                    break;
+        let ways = &self.ways;
+        let (low, high) = depth_cluster(z0, || ways.iter().flatten().copied().filter(|z| !z.is_nan()), gap);
+        let mut width = 1;
+        for walk in ways {
+            let (mut run, mut misses) = (0, 0);
+            for (k, &z) in walk.iter().enumerate() {
+                if (low..=high).contains(&z) {
+                    (run, misses) = (k + 1, 0);
+                } else {
+                    misses += 1;
+                    if misses > MAX_MISSES {
+                        break;
+                    }
                 }
             }
+            width += run;
         }
-        width += run;
+        width
     }
-    width
+
+    /// By how many radii the surface at pixel `p` is wider across `normal` than `WIDE_FROM` radii
+    /// (0 to `WIDE_CAP`), for a part of radius `radius` seen at focal length `focal_px`.
+    pub fn excess_width(&mut self, image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, radius: f32) -> f32 {
+        let radius_px = radius * focal_px / image.depth(p);
+        let reach = ((WIDE_FROM + WIDE_CAP) * radius_px).ceil() as usize + 2;
+        let width = self.cross_width(image, p, normal, focal_px, reach) as f32;
+        (width / radius_px - WIDE_FROM).clamp(0.0, WIDE_CAP)
+    }
 }
 
 /// The range of the cluster of `depths` that holds `start`: the values reachable from it in steps
@@ -92,15 +116,6 @@ fn depth_cluster<I: Iterator<Item = f32>>(start: f32, depths: impl Fn() -> I, ga
 pub(crate) const WIDE_FROM: f32 = 3.5;
 /// Widths past `WIDE_FROM` count up to this many radii.
 pub(crate) const WIDE_CAP: f32 = 4.0;
-
-/// By how many radii the surface at pixel `p` is wider across `normal` than `WIDE_FROM` radii
-/// (0 to `WIDE_CAP`), for a part of radius `radius` seen at focal length `focal_px`.
-pub(crate) fn excess_width(image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, radius: f32) -> f32 {
-    let radius_px = radius * focal_px / image.depth(p);
-    let reach = ((WIDE_FROM + WIDE_CAP) * radius_px).ceil() as usize + 2;
-    let width = cross_width(image, p, normal, focal_px, reach) as f32;
-    (width / radius_px - WIDE_FROM).clamp(0.0, WIDE_CAP)
-}
 
 /// Unit normal of the polyline at each point (central differences; zero where it has no direction).
 pub(crate) fn normals(points: &[[f32; 2]]) -> Vec<[f32; 2]> {
