@@ -4,8 +4,6 @@
 use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashSet};
 
-use rayon::prelude::*;
-
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
 use crate::width::Walks;
@@ -303,19 +301,33 @@ impl<'a> Search<'a> {
 }
 
 /// Per node: `WIDE_WEIGHT` times the excess width (in radii, capped) times a pixel's world size;
-/// all zero when the focal length is unknown.
+/// all zero when the focal length is unknown. One walk across the stroke measures the surface's
+/// run, and every band pixel of that run takes its width: a part 20 pixels wide is walked once
+/// per line, not twenty times.
 fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &TraceParams) -> Vec<f64> {
     let focal = params.focal_px;
     if focal <= 0.0 {
         return vec![0.0; band.len()];
     }
+    let (mut walks, mut run) = (Walks::default(), Vec::new());
+    let mut excess = vec![f32::NAN; band.len()];
+    for node in 0..band.len() {
+        if !excess[node].is_nan() {
+            continue;
+        }
+        run.clear();
+        let p = band.pixel[node] as usize;
+        let normal = stroke.normal[band.segment[node] as usize];
+        let e = walks.excess_width_run(image, p, normal, focal, params.radius, Some(&mut run));
+        excess[node] = e;
+        for other in run.iter().filter_map(|&q| band.node(q)) {
+            if excess[other].is_nan() {
+                excess[other] = e;
+            }
+        }
+    }
     (0..band.len())
-        .into_par_iter()
-        .map_init(Walks::default, |walks, node| {
-            let p = band.pixel[node] as usize;
-            let excess = walks.excess_width(image, p, stroke.normal[band.segment[node] as usize], focal, params.radius);
-            WIDE_WEIGHT * f64::from(excess) * f64::from(image.depth(p) / focal)
-        })
+        .map(|node| WIDE_WEIGHT * f64::from(excess[node]) * f64::from(image.depth(band.pixel[node] as usize) / focal))
         .collect()
 }
 

@@ -16,10 +16,12 @@ const MAX_MISSES: usize = 1;
 const FAR_GAPS: f32 = 3.0;
 
 /// Reusable buffers for measuring widths (one per thread): a trace measures thousands, and these
-/// keep them from allocating. Each way holds the depth of every pixel walked, NaN where it failed.
+/// keep them from allocating. Each way holds the depth of every pixel walked, NaN where it failed,
+/// and the pixel itself.
 #[derive(Debug, Default)]
 pub(crate) struct Walks {
     ways: [Vec<f32>; 2],
+    pixels: [Vec<usize>; 2],
 }
 
 impl Walks {
@@ -33,16 +35,24 @@ impl Walks {
         focal_px: f32,
         max_px: usize,
     ) -> usize {
+        let gap = self.walk(image, p, normal, focal_px, max_px);
+        self.width(image.depth(p), gap, None)
+    }
+
+    /// Walks both ways from pixel `p` (see the module docs); returns the depth gap at its depth.
+    fn walk(&mut self, image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, max_px: usize) -> f32 {
         let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
         let z0 = image.depth(p);
         let gap = GAP_FLOOR_PX * z0 / focal_px;
         let far = FAR_GAPS * gap;
-        for (walk, sign) in self.ways.iter_mut().zip([1.0_f32, -1.0]) {
+        for ((walk, pixels), sign) in self.ways.iter_mut().zip(&mut self.pixels).zip([1.0_f32, -1.0]) {
             walk.clear();
+            pixels.clear();
             let (mut low, mut high, mut misses) = (z0, z0, 0);
             for k in 1..=max_px {
                 let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
                 let Some(q) = image.pixel_at(x, y) else { break };
+                pixels.push(q);
                 if !image.known(q) {
                     // not rendered (a render of the band only): walk on, so that one more render
                     // holds all this walk can read; this result is discarded
@@ -62,10 +72,16 @@ impl Walks {
                 }
             }
         }
+        gap
+    }
+
+    /// The width of the last walk from a pixel at depth `z0`: the run around it in its depth
+    /// cluster. The run's pixels in the cluster (the start left out) go into `run_pixels`, if given.
+    fn width(&self, z0: f32, gap: f32, mut run_pixels: Option<&mut Vec<usize>>) -> usize {
         let ways = &self.ways;
         let (low, high) = depth_cluster(z0, || ways.iter().flatten().copied().filter(|z| !z.is_nan()), gap);
         let mut width = 1;
-        for walk in ways {
+        for (walk, pixels) in ways.iter().zip(&self.pixels) {
             let (mut run, mut misses) = (0, 0);
             for (k, &z) in walk.iter().enumerate() {
                 if (low..=high).contains(&z) {
@@ -78,6 +94,9 @@ impl Walks {
                 }
             }
             width += run;
+            if let Some(out) = run_pixels.as_deref_mut() {
+                out.extend((0..run).filter(|&k| (low..=high).contains(&walk[k])).map(|k| pixels[k]));
+            }
         }
         width
     }
@@ -85,9 +104,24 @@ impl Walks {
     /// By how many radii the surface at pixel `p` is wider across `normal` than `WIDE_FROM` radii
     /// (0 to `WIDE_CAP`), for a part of radius `radius` seen at focal length `focal_px`.
     pub fn excess_width(&mut self, image: &IndexImage, p: usize, normal: [f32; 2], focal_px: f32, radius: f32) -> f32 {
+        self.excess_width_run(image, p, normal, focal_px, radius, None)
+    }
+
+    /// As `excess_width`, with the pixels of the surface's run across `normal` (other than `p`)
+    /// added to `run`: the width measured from any of them along this line is about the same.
+    pub fn excess_width_run(
+        &mut self,
+        image: &IndexImage,
+        p: usize,
+        normal: [f32; 2],
+        focal_px: f32,
+        radius: f32,
+        run: Option<&mut Vec<usize>>,
+    ) -> f32 {
         let radius_px = radius * focal_px / image.depth(p);
         let reach = ((WIDE_FROM + WIDE_CAP) * radius_px).ceil() as usize + 2;
-        let width = self.cross_width(image, p, normal, focal_px, reach) as f32;
+        let gap = self.walk(image, p, normal, focal_px, reach);
+        let width = self.width(image.depth(p), gap, run) as f32;
         (width / radius_px - WIDE_FROM).clamp(0.0, WIDE_CAP)
     }
 }
