@@ -216,7 +216,8 @@ fn surfaces_near(
             if image.id_at(p) < 0 {
                 continue;
             }
-            let d = (col as f32 + 0.5 - point[0]).hypot(row as f32 + 0.5 - point[1]);
+            let (dx, dy) = (col as f32 + 0.5 - point[0], row as f32 + 0.5 - point[1]);
+            let d = (dx * dx + dy * dy).sqrt(); // not hypot: a libm call per pixel, for no gain here
             if d <= reach_px.max(0.75) {
                 pixels.push((image.depth(p), d, p));
             }
