@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._args import non_negative, numbers, positive, scene_help, scene_path, vertex_or_fraction
+from ._args import non_negative, numbers, pixels, positive, scene_help, scene_path, vertex_or_fraction
 
 NAME = "animate"
 HELP = "pull a rod vertex, hold, release; write rendered frames, a video and optionally deformed .ply files"
@@ -83,7 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="camera to render (and --drag) from (default: the first rod's, the view its stroke was drawn in)",
     )
     parser.add_argument("--view", metavar="N|NAME", help="which camera of --camera (default: the first)")
-    parser.add_argument("--width", type=int, help="render width (default: the camera's)")
+    parser.add_argument("--width", type=pixels, help="render width (default: the camera's)")
     parser.add_argument(
         "--video",
         type=_video,
