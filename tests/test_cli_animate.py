@@ -13,6 +13,7 @@ from PIL import Image
 
 from conftest import DATA
 from sketchrodgs import Camera, SketchRodGSError, data, extract_rod, load_scene, save_scene
+from sketchrodgs.cli import main
 
 CAMERA = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=320, height=180, fov_y_deg=40)
 
@@ -149,11 +150,10 @@ def test_drag_pulls_in_pixels_of_the_camera(ring_rod, tmp_path):
     """--drag 40,-30: the grabbed vertex's Gaussians move 40 px right and 30 px up in the rod's view."""
     path, extraction = ring_rod
     out = tmp_path / "drag"
-    result = run_cli(
+    assert main([
         "animate", "sample:ring", str(path), "--grab", "0.5", "--drag", "40,-30",
         "--duration", "0.2", "--hold", "0.1", "--fps", "10", "--video", "none", "--ply", "-o", str(out),
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
+    ]) == 0  # fmt: skip
     rest = load_scene(data.sample("ring")).means
     held = load_scene(out / "ply" / "frame_0003.ply").means[: len(rest)]
     middle = int(np.argmin(np.abs(np.linspace(0, 1, len(extraction.polyline)) - 0.5)))
@@ -170,14 +170,13 @@ def test_camera_screen_offset_moves_the_projection_by_the_pixels():
     assert depth[0] == pytest.approx(depth[1])  # at the point's depth
 
 
-def test_a_pull_longer_than_the_rod_is_warned_about(ring_rod, tmp_path):
+def test_a_pull_longer_than_the_rod_is_warned_about(ring_rod, tmp_path, caplog):
     path, _ = ring_rod
-    result = run_cli(
+    assert main([
         "animate", "sample:ring", str(path), "--grab", "3", "--to", "-5,0,0",
         "--duration", "0.1", "--hold", "0", "--fps", "10", "--video", "none", "-o", str(tmp_path / "far"),
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
-    assert "the pull (5) is longer than the rod" in result.stderr
+    ]) == 0  # fmt: skip
+    assert "the pull (5) is longer than the rod" in caplog.text
 
 
 # ----- clamps and pins -----------------------------------------------------------------------------
@@ -214,32 +213,32 @@ def test_clamp_choices_hold_the_ends_they_name(ring_rod, clamp, pins, ends_move)
 
 def test_animate_clamp_and_pin_options(ring_rod, tmp_path):
     path, _ = ring_rod
-    result = run_cli(
+    assert main([
         "animate", "sample:ring", str(path), "--grab", "-1", "--to", "0,0.05,0", "--clamp", "start",
         "--pin", "0.5", "--duration", "0.1", "--hold", "0", "--fps", "10", "--video", "none", "-o", str(tmp_path / "c"),
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
-    result = run_cli("animate", "sample:ring", str(path), "--grab", "1", "--to", "0,1,0", "--clamp", "top", "-o", "x")
-    assert result.returncode == 2 and "--clamp" in result.stderr
+    ]) == 0  # fmt: skip
+    with pytest.raises(SystemExit) as usage:
+        main(["animate", "sample:ring", str(path), "--grab", "1", "--to", "0,1,0", "--clamp", "top", "-o", "x"])
+    assert usage.value.code == 2
 
 
 # ----- the rod's scene ------------------------------------------------------------------------------
 
 
-def test_a_rod_refuses_another_scene_of_the_same_size(ring_rod, tmp_path):
+def test_a_rod_refuses_another_scene_of_the_same_size(ring_rod, tmp_path, capsys):
     from sketchrodgs.animate import Animation
 
     path, extraction = ring_rod
     assert json.loads(path.read_text())["scene"]["count"] == 10_000
     torus = DATA / "torus_10k.splat"  # 10,000 Gaussians too
-    result = run_cli("animate", str(torus), str(path), "--grab", "3", "--to", "0,0.1,0", "-o", str(tmp_path / "t"))
-    assert result.returncode == 1 and len(result.stderr.strip().splitlines()) == 1
-    assert f"{path}: this rod was extracted from another scene" in result.stderr and "torus_10k.splat" in result.stderr
-    assert not (tmp_path / "t").exists()
+    assert main(["animate", str(torus), str(path), "--grab", "3", "--to", "0,0.1,0", "-o", str(tmp_path / "t")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{path}: this rod was extracted from another scene" in err
+    assert "torus_10k.splat" in err and not (tmp_path / "t").exists()
     with pytest.raises(SketchRodGSError, match="rod 0: this rod was extracted from another scene"):
         Animation(load_scene(torus), [extraction])
-    view = run_cli("view", str(torus), "--rod", str(path), "--port", "1")
-    assert view.returncode == 1 and "another scene" in view.stderr
+    assert main(["view", str(torus), "--rod", str(path), "--port", "1"]) == 1
+    assert "another scene" in capsys.readouterr().err
 
 
 def test_the_scene_identity_survives_conversion_and_old_rods_still_load(ring_rod, tmp_path):
