@@ -120,3 +120,13 @@ def test_outputs_refuse_one_path_for_two_outputs(tmp_path):
         outputs.file(tmp_path / "a.png", "-o")
         outputs.file(tmp_path / "." / "a.png", "--overlay")
     assert left_in(tmp_path) == []
+
+
+def test_folders_written_over_time_are_checked_first(tmp_path, capsys):
+    """The demo's folder and the viewer's export folder: made if missing, but not in a missing folder."""
+    (tmp_path / "file").write_text("mine")
+    assert main(["view", "sample:ring", "-o", str(tmp_path / "nodir" / "exports"), "--port", "1"]) == 1
+    assert f"the folder '{tmp_path / 'nodir'}' does not exist" in one_line_error(capsys)
+    assert main(["demo", "-o", str(tmp_path / "file")]) == 1
+    assert "exists and is not a folder" in one_line_error(capsys)
+    assert left_in(tmp_path) == ["file"]

@@ -20,6 +20,19 @@ from ..errors import SketchRodGSError
 STAGING_PREFIX = ".sketchrodgs-"
 
 
+def check_folder(path: str | os.PathLike[str], option: str) -> None:
+    """For a folder written into over time (the demo's, the viewer's exports), checked before any
+    work: it is a folder, or can be made in an existing, writable one."""
+    target = Path(path)
+    if target.exists() and not target.is_dir():
+        raise SketchRodGSError(f"{option} {path}: exists and is not a folder")
+    parent = target if target.is_dir() else target.parent
+    if not parent.is_dir():
+        raise SketchRodGSError(f"{option} {path}: the folder {str(parent)!r} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SketchRodGSError(f"{option} {path}: cannot write in the folder {str(parent)!r}")
+
+
 class Outputs:
     """The files and folders a command writes (see the module docstring).
 

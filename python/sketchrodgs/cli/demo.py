@@ -24,13 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from .. import data
     from ..demo import run_demo
-    from ..errors import SketchRodGSError
+    from ._outputs import check_folder
 
     out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise SketchRodGSError(f"-o {out}: exists and is not a folder")
-    if not out.parent.is_dir():
-        raise SketchRodGSError(f"-o {out}: the folder {str(out.parent)!r} does not exist")
+    check_folder(out, "-o")
     summary = run_demo(out, sample=SAMPLE, progress=lambda line: print(f"  {line}", flush=True))
     print(
         f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json (+ rod.bindings.npz), frames/ ({summary['frames']} PNGs), "

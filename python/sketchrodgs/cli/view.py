@@ -91,10 +91,8 @@ def run(args: argparse.Namespace) -> int:
     import signal
     import sys
     import time
-    from pathlib import Path
 
     from ..camera import select_camera
-    from ..errors import SketchRodGSError
     from ..extract import load_rod
     from ..framing import frame_scene, scene_up
     from ..io import load_scene
@@ -102,9 +100,9 @@ def run(args: argparse.Namespace) -> int:
     from ..scene_identity import check_rod_scene
     from ..viewer import ViewerApp
     from ._framing import camera_file, scene_cameras
+    from ._outputs import check_folder
 
-    if not Path(args.output_dir).is_dir():
-        raise SketchRodGSError(f"-o {args.output_dir}: not a folder")
+    check_folder(args.output_dir, "-o")
     loaded = [load_rod(path) for path in args.rod]
     cameras = scene_cameras(args)
     scene = load_scene(args.scene)
