@@ -57,3 +57,40 @@ def test_usage_error_is_exit_2():
     assert run_cli("info").returncode == 2
     assert run_cli("info", "sample:nonexistent").returncode == 2
     assert build_parser().prog == "sketchrodgs"
+
+
+HEAVY = ("numpy", "scipy", "viser", "imageio", "PIL", "tqdm", "plyfile")
+
+
+def modules_loaded_by(*args: str) -> set[str]:
+    """The heavy top-level packages imported by `sketchrodgs ARGS` (a fresh interpreter)."""
+    code = (
+        "import sys\nfrom sketchrodgs.cli import main\n"
+        f"try:\n    main({list(args)!r})\nexcept SystemExit:\n    pass\n"
+        "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return set(out.stdout.split()) & set(HEAVY)
+
+
+def test_start_up_imports_only_what_the_command_needs():
+    """`--version` and the help import none of the heavy libraries, `info` only numpy and the
+    readers (start-up in about 0.1 s instead of 0.6 s)."""
+    assert modules_loaded_by("--version") == set()
+    assert modules_loaded_by("--help") == set()
+    assert modules_loaded_by("render", "--help") == set()
+    assert modules_loaded_by("info", "sample:ring") == {"numpy", "plyfile"}
+    import sketchrodgs
+
+    assert sketchrodgs.render.__module__ == "sketchrodgs.render" and callable(sketchrodgs.skin)  # lazily, by name
+
+
+def test_every_public_name_resolves():
+    import sketchrodgs
+
+    assert set(sketchrodgs.__all__) == {*sketchrodgs._EXPORTS, "__version__", "data"}
+    for name in sketchrodgs.__all__:
+        assert getattr(sketchrodgs, name) is not None
+    with pytest.raises(AttributeError):
+        sketchrodgs.no_such_name  # noqa: B018

@@ -11,7 +11,9 @@ import plyfile
 import pytest
 from PIL import Image
 
-from sketchrodgs import Camera, data, extract_rod, load_scene
+from conftest import DATA
+from sketchrodgs import Camera, SketchRodGSError, data, extract_rod, load_scene, save_scene
+from sketchrodgs.cli import main
 
 CAMERA = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=320, height=180, fov_y_deg=40)
 
@@ -128,3 +130,124 @@ def test_bad_rod_files_and_arguments_fail_readably(ring_rod, tmp_path):
         ).returncode
         == 2
     )
+
+
+# ----- pulls in screen space, along the rod, with negative values ---------------------------------
+
+
+def test_negative_values_follow_their_option():
+    from sketchrodgs.cli import build_parser
+    from sketchrodgs.cli._args import attach_negative_lists
+
+    words = attach_negative_lists(["animate", "s.ply", "r.json", "--grab", "-1", "--to", "-0.02,0,0", "-o", "out"])
+    assert words[-4:] == ["-1", "--to=-0.02,0,0", "-o", "out"]
+    args = build_parser("animate").parse_args(words)
+    assert args.to == (-0.02, 0.0, 0.0) and args.grab == -1
+    assert attach_negative_lists(["--drag", "-10,-5e-1"]) == ["--drag=-10,-5e-1"]
+
+
+def test_drag_pulls_in_pixels_of_the_camera(ring_rod, tmp_path):
+    """--drag 40,-30: the grabbed vertex's Gaussians move 40 px right and 30 px up in the rod's view."""
+    path, extraction = ring_rod
+    out = tmp_path / "drag"
+    assert main([
+        "animate", "sample:ring", str(path), "--grab", "0.5", "--drag", "40,-30",
+        "--duration", "0.2", "--hold", "0.1", "--fps", "10", "--video", "none", "--ply", "-o", str(out),
+    ]) == 0  # fmt: skip
+    rest = load_scene(data.sample("ring")).means
+    held = load_scene(out / "ply" / "frame_0003.ply").means[: len(rest)]
+    middle = int(np.argmin(np.abs(np.linspace(0, 1, len(extraction.polyline)) - 0.5)))
+    near = np.linalg.norm(rest - extraction.polyline[middle], axis=1) < 1.5 * extraction.radius
+    (before, _), (after, _) = CAMERA.project(rest[near]), CAMERA.project(held[near])
+    np.testing.assert_allclose(np.median(after - before, axis=0), [40, -30], atol=4)
+
+
+def test_camera_screen_offset_moves_the_projection_by_the_pixels():
+    point = np.array([0.1, -0.05, 0.3])
+    offset = CAMERA.screen_offset(point, (12.0, -7.0))
+    (a, b), depth = CAMERA.project(np.stack([point, point + offset]))
+    np.testing.assert_allclose(b - a, [12, -7], atol=1e-9)
+    assert depth[0] == pytest.approx(depth[1])  # at the point's depth
+
+
+def test_a_pull_longer_than_the_rod_is_warned_about(ring_rod, tmp_path, caplog):
+    path, _ = ring_rod
+    assert main([
+        "animate", "sample:ring", str(path), "--grab", "3", "--to", "-5,0,0",
+        "--duration", "0.1", "--hold", "0", "--fps", "10", "--video", "none", "-o", str(tmp_path / "far"),
+    ]) == 0  # fmt: skip
+    assert "the pull (5) is longer than the rod" in caplog.text
+
+
+# ----- clamps and pins -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("clamp", "pins", "ends_move"),
+    [
+        ("both", [], (False, False)),
+        ("start", [], (False, True)),
+        ("end", [], (True, False)),
+        ("none", [-1], (True, False)),
+    ],
+)
+def test_clamp_choices_hold_the_ends_they_name(ring_rod, clamp, pins, ends_move):
+    from sketchrodgs.animate import Animation, Pull
+
+    _, extraction = ring_rod
+    scene = load_scene(data.sample("ring"))
+    animation = Animation(scene, [extraction], clamp=clamp, pins=[pins])
+    rod = animation.rods[0]
+    kinds = rod.boundaries
+    assert (kinds[0], kinds[-1]) == {
+        "both": ("clamped", "clamped"),
+        "start": ("clamped", "free"),
+        "end": ("free", "clamped"),
+        "none": ("free", "pinned"),
+    }[clamp]
+    for _ in animation.frames(Pull(len(rod) // 3, (0, 0.1, 0), duration=0.2, hold=0.1, release=False), fps=20):
+        pass
+    moved = np.linalg.norm(rod.positions - rod.rest_positions, axis=1)
+    assert tuple(bool(m > 1e-4) for m in (moved[0], moved[-1])) == ends_move
+
+
+def test_animate_clamp_and_pin_options(ring_rod, tmp_path):
+    path, _ = ring_rod
+    assert main([
+        "animate", "sample:ring", str(path), "--grab", "-1", "--to", "0,0.05,0", "--clamp", "start",
+        "--pin", "0.5", "--duration", "0.1", "--hold", "0", "--fps", "10", "--video", "none", "-o", str(tmp_path / "c"),
+    ]) == 0  # fmt: skip
+    with pytest.raises(SystemExit) as usage:
+        main(["animate", "sample:ring", str(path), "--grab", "1", "--to", "0,1,0", "--clamp", "top", "-o", "x"])
+    assert usage.value.code == 2
+
+
+# ----- the rod's scene ------------------------------------------------------------------------------
+
+
+def test_a_rod_refuses_another_scene_of_the_same_size(ring_rod, tmp_path, capsys):
+    from sketchrodgs.animate import Animation
+
+    path, extraction = ring_rod
+    assert json.loads(path.read_text())["scene"]["count"] == 10_000
+    torus = DATA / "torus_10k.splat"  # 10,000 Gaussians too
+    assert main(["animate", str(torus), str(path), "--grab", "3", "--to", "0,0.1,0", "-o", str(tmp_path / "t")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{path}: this rod was extracted from another scene" in err
+    assert "torus_10k.splat" in err and not (tmp_path / "t").exists()
+    with pytest.raises(SketchRodGSError, match="rod 0: this rod was extracted from another scene"):
+        Animation(load_scene(torus), [extraction])
+    assert main(["view", str(torus), "--rod", str(path), "--port", "1"]) == 1
+    assert "another scene" in capsys.readouterr().err
+
+
+def test_the_scene_identity_survives_conversion_and_old_rods_still_load(ring_rod, tmp_path):
+    from sketchrodgs.animate import Animation
+    from sketchrodgs.extract import Extraction
+
+    path, extraction = ring_rod
+    save_scene(load_scene(data.sample("ring")), tmp_path / "ring.ply")  # .splat -> .ply: the same means
+    Animation(load_scene(tmp_path / "ring.ply"), [extraction])
+    old = extraction.to_json()
+    del old["scene"]  # a rod file written before the scene was recorded: not checked
+    Animation(load_scene(DATA / "torus_10k.splat"), [Extraction.from_json(old)])

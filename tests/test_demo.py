@@ -7,10 +7,13 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from sketchrodgs import Camera, data, load_scene
 from sketchrodgs.extract import load_rod
+
+pytestmark = pytest.mark.slow  # run by default; `-m "not slow"` leaves it out
 
 
 def test_demo_writes_everything_it_promises(tmp_path):

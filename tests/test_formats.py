@@ -424,8 +424,12 @@ def test_convert_command(tmp_path, capsys):
     np.testing.assert_array_equal(converted.sh, original.sh)
     assert main(["convert", str(GUITAR), str(tmp_path / "guitar.splat")]) == 0
     assert len(load_scene(tmp_path / "guitar.splat")) == 90_854
-    assert main(["convert", str(GUITAR), str(tmp_path / "guitar.spz")]) == 1
-    assert "cannot write '.spz'" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as refused:  # a usage error, before the scene is read
+        main(["convert", str(GUITAR), str(tmp_path / "guitar.spz")])
+    assert (
+        refused.value.code == 2
+        and "guitar.spz: expected a file name ending in .ply or .splat" in capsys.readouterr().err
+    )
     assert not (tmp_path / "guitar.spz").exists()
 
 

@@ -493,7 +493,14 @@ def test_app_refuses_bad_settings(ring):
 # ----- the command ----------------------------------------------------------------------------
 
 
-def test_view_command_serves_the_page_on_loopback(tmp_path, ring_rod):
+@pytest.mark.parametrize(
+    ("stop", "sigint", "code"),
+    [
+        (signal.SIGTERM, signal.SIG_IGN, 143),  # as a background job, whose SIGINT is ignored
+        (signal.SIGINT, signal.SIG_DFL, 130),  # Ctrl-C: "interrupted"
+    ],
+)
+def test_view_command_serves_the_page_on_loopback(tmp_path, ring_rod, stop, sigint, code):
     port = free_port()
     ring_rod.save(tmp_path / "rod.json")
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -517,6 +524,7 @@ def test_view_command_serves_the_page_on_loopback(tmp_path, ring_rod):
         stderr=subprocess.STDOUT,
         text=True,
         env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, sigint),
     )
     try:
         line, deadline = "", time.monotonic() + 60
@@ -527,13 +535,13 @@ def test_view_command_serves_the_page_on_loopback(tmp_path, ring_rod):
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as response:
             assert response.status == 200 and b"<html" in response.read().lower()
     finally:
-        process.send_signal(signal.SIGINT)
+        process.send_signal(stop)
         try:
             process.wait(timeout=20)
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait(timeout=10)
-    assert process.returncode == 130  # Ctrl-C: "interrupted"
+    assert process.returncode == code  # stopped cleanly, by either signal
 
 
 def test_view_command_usage_errors():

@@ -21,7 +21,10 @@ from sketchrodgs import Camera, data, load_scene, render
 from sketchrodgs.viewer import ViewerApp, camera_from_viser
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium")) if p and os.path.exists(p)), None)
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)")
+pytestmark = [
+    pytest.mark.slow,  # run by default; `-m "not slow"` leaves it out
+    pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)"),
+]
 
 FLAGS = [
     "--headless",

@@ -1,8 +1,9 @@
 """Pull and release: simulate extracted rods and skin the scene, frame by frame.
 
-The app's interaction as a script: both ends of each rod clamped, one vertex grabbed and its
-target moved by an offset over `duration` seconds, held for `hold` seconds, then released and
-left to spring back for `settle` seconds.
+The app's interaction as a script: the ends of each rod clamped (both by default, as in the
+authors' app; or one, or none) and any vertices pinned, one vertex grabbed and its target moved by
+an offset over `duration` seconds, held for `hold` seconds, then released and left to spring back
+for `settle` seconds.
 """
 
 from __future__ import annotations
@@ -11,17 +12,32 @@ import logging
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
 import numpy as np
 
 from .errors import SketchRodGSError
 from .extract import Extraction
+from .polyline import arc_lengths, polyline_length
 from .rig import DEFAULT_END_RAMP, Rig
 from .rod import Rod, RodParams, World
 from .scene import GaussianScene
+from .scene_identity import check_rod_scene
 from .skin import skin_into
 
 logger = logging.getLogger("sketchrodgs")
+
+Clamp = Literal["both", "start", "end", "none"]
+CLAMPS: tuple[str, ...] = get_args(Clamp)
+_CLAMPED_ENDS = {"both": (0, -1), "start": (0,), "end": (-1,), "none": ()}
+
+
+def vertex_at_fraction(polyline: np.ndarray, fraction: float) -> int:
+    """The vertex of `polyline` (M, 3) nearest to `fraction` (0..1) of its length from the start."""
+    if not 0 <= fraction <= 1:
+        raise SketchRodGSError(f"fraction along the rod: must be in 0..1, got {fraction}")
+    s = arc_lengths(np.asarray(polyline, np.float64))
+    return int(np.argmin(np.abs(s - fraction * s[-1])))
 
 
 @dataclass(frozen=True)
@@ -94,7 +110,11 @@ class Animation:
         extractions: one per rod (from `extract_rod` or `load_rod`).
         params: material per rod (a single one is used for all); its radius is replaced by each
             extraction's radius.
-        clamp_ends: clamp both ends of every rod, as the authors' app does.
+        clamp: which ends of every rod are clamped (position and frame held): "both", as the
+            authors' app does, "start" (vertex 0: a branch held at its root, its tip free), "end",
+            or "none".
+        pins: per rod, vertices whose positions are held (negative counts from the end); a
+            shorter list leaves the remaining rods unpinned.
         subdivide: split needle Gaussians along the rods first (`Rig`); the animated scene then
             has more rows than `scene`, and `rig.source` maps them back.
         end_ramp: the motion eases in over this many R from a clamped end (`Rig.build`).
@@ -109,26 +129,33 @@ class Animation:
         scene: GaussianScene,
         extractions: Sequence[Extraction],
         params: RodParams | Sequence[RodParams] = RodParams(),
-        clamp_ends: bool = True,
+        clamp: Clamp = "both",
+        pins: Sequence[Sequence[int]] = (),
         subdivide: bool = True,
         end_ramp: float = DEFAULT_END_RAMP,
     ) -> None:
         if not extractions:
             raise SketchRodGSError("no rods to animate")
+        if clamp not in CLAMPS:
+            raise SketchRodGSError(f"clamp: expected one of {', '.join(CLAMPS)}, got {clamp!r}")
+        if len(pins) > len(extractions):
+            raise SketchRodGSError(f"pins: {len(pins)} lists for {len(extractions)} rods")
         per_rod = [params] * len(extractions) if isinstance(params, RodParams) else list(params)
         self.scene = scene
         self.world = World()
         self.rods: list[Rod] = []
         for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
+            check_rod_scene(extraction.scene_identity, scene, f"rod {k}", "the scene animated")
             if len(extraction.gaussian_ids) and extraction.gaussian_ids.max() >= len(scene):
                 raise SketchRodGSError(
                     f"rod {k}: binds Gaussian {int(extraction.gaussian_ids.max())} but the scene has {len(scene)}"
                 )
             material = RodParams(**{**p.to_dict(), "radius": extraction.radius})
             rod = Rod(extraction.polyline, params=material, world=self.world)
-            if clamp_ends:
-                rod.clamp(0)
-                rod.clamp(-1)
+            for end in _CLAMPED_ENDS[clamp]:
+                rod.clamp(end)
+            for vertex in pins[k] if k < len(pins) else ():
+                rod.pin(vertex)
             self.rods.append(rod)
         self.rig = Rig.build(scene, extractions, self.rods, subdivide=subdivide, end_ramp=end_ramp)
         self.rest_scene = self.rig.scene
@@ -161,6 +188,15 @@ class Animation:
             rod.free(pull.vertex)
         start = np.array(rod.positions[pull.vertex], np.float64)
         offset = np.array(pull.offset)
+        length = polyline_length(rod.rest_positions)
+        if np.linalg.norm(offset) > length:
+            # the rod cannot follow that far; its Gaussians would be drawn out into a streak
+            logger.warning(
+                "rod %d: the pull (%.3g) is longer than the rod (%.3g); its Gaussians will be stretched far",
+                pull.rod,
+                np.linalg.norm(offset),
+                length,
+            )
         dt = 1.0 / fps
         count = int(round(pull.total * fps))
         rod.grab(pull.vertex, start)

@@ -129,6 +129,16 @@ class Camera:
             uv = np.stack([self.fx * cam[:, 0] / safe + self.cx, self.fy * cam[:, 1] / safe + self.cy], axis=1)
         return uv, depth
 
+    def screen_offset(self, point: npt.ArrayLike, pixels: Sequence[float]) -> np.ndarray:
+        """(3,) the world displacement, parallel to the image plane, that moves `point` by
+        `pixels` (du, dv; v down) in the image: pixels at the point's depth."""
+        p = np.asarray(point, np.float64).reshape(3)
+        depth = float(self.world_to_camera[2, :3] @ p + self.world_to_camera[2, 3])
+        if not depth > 0:
+            raise CameraError(f"the point {tuple(np.round(p, 6))} is behind the camera")
+        du, dv = (float(v) for v in pixels)
+        return self.world_to_camera[:3, :3].T @ np.array([du * depth / self.fx, dv * depth / self.fy, 0.0])
+
     def resized(self, width: int, height: int | None = None) -> Camera:
         """The same view at another image size (focal lengths and principal point scaled)."""
         if height is None:

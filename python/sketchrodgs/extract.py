@@ -25,6 +25,7 @@ from .partial_render import MARGIN_PX, PartialRender, band_tiles
 from .render import RenderResult
 from .rod import MAX_ROD_VERTICES
 from .scene import GaussianScene
+from .scene_identity import SceneIdentity
 
 DEFAULT_SMOOTHING = 1.0  # radii (polyline.smooth_axis)
 MAX_SMOOTHING = 100.0  # far past any use: the axis is a straight line long before
@@ -53,6 +54,8 @@ class Extraction:
         camera: the camera the stroke was drawn in.
         stroke: (S, 2) float32 stroke in pixel coordinates.
         timings: seconds per stage.
+        scene_identity: the scene the rod was extracted from (None for rod files written before
+            it was recorded); `Animation` refuses another scene.
     """
 
     polyline: np.ndarray
@@ -68,10 +71,13 @@ class Extraction:
     stroke: np.ndarray
     radius_estimated: bool = False
     timings: dict[str, float] = field(default_factory=dict)
+    scene_identity: SceneIdentity | None = None
 
     def to_json(self, material: dict[str, Any] | None = None) -> dict[str, Any]:
         """The rod JSON (docs/rod_file.md) (polyline, radius, edge_length, camera, stroke, gaussian_ids, ...)."""
+        scene = {"scene": self.scene_identity.to_dict()} if self.scene_identity is not None else {}
         return {
+            **scene,
             "polyline": self.polyline.tolist(),
             "radius": self.radius,
             "edge_length": self.edge_length,
@@ -142,6 +148,7 @@ class Extraction:
             pieces_reached_goal=[],
             camera=Camera.from_dict(data["camera"], f"{source}: camera"),
             stroke=_array(data.get("stroke", np.empty((0, 2))), np.float32, (None, 2), f"{source}: stroke"),
+            scene_identity=SceneIdentity.from_dict(data["scene"], source) if "scene" in data else None,
         )
 
 
@@ -372,6 +379,7 @@ def extract_rod(
         stroke=stroke,
         radius_estimated=estimated,
         timings=timings,
+        scene_identity=SceneIdentity.of(scene),
     )
 
 

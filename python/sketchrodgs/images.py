@@ -1,9 +1,10 @@
-"""Pictures: 8-bit conversion, PNG writing, and overlays of stroke, path and polyline."""
+"""Pictures: 8-bit conversion, PNG and JPEG writing, and overlays of stroke, path and polyline."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
@@ -35,6 +36,20 @@ def save_png(path: str | os.PathLike[str], image: np.ndarray | Image.Image, comp
         image = Image.fromarray(np.ascontiguousarray(pixels), "RGB")
     with atomic_open(path) as stream:
         image.save(stream, format="PNG", compress_level=compress_level)
+
+
+JPEG_QUALITY = 95
+
+
+def save_image(path: str | os.PathLike[str], image: np.ndarray | Image.Image) -> None:
+    """Write an image as its name says: JPEG (quality 95) for .jpg or .jpeg, PNG otherwise."""
+    if Path(path).suffix.lower() not in (".jpg", ".jpeg"):
+        save_png(path, image)
+        return
+    if not isinstance(image, Image.Image):
+        image = Image.fromarray(np.ascontiguousarray(image if image.dtype == np.uint8 else to_uint8(image)), "RGB")
+    with atomic_open(path) as stream:
+        image.save(stream, format="JPEG", quality=JPEG_QUALITY)
 
 
 def draw_overlay(

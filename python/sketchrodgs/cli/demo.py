@@ -5,9 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .. import data
-from ..demo import run_demo
-
 SAMPLE = "plant"
 
 NAME = "demo"
@@ -25,7 +22,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import data
+    from ..demo import run_demo
+    from ._outputs import check_folder
+
     out = Path(args.output)
+    check_folder(out, "-o")
     summary = run_demo(out, sample=SAMPLE, progress=lambda line: print(f"  {line}", flush=True))
     print(
         f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json (+ rod.bindings.npz), frames/ ({summary['frames']} PNGs), "

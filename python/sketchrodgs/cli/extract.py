@@ -3,26 +3,23 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-import numpy as np
+from ._args import IMAGE_SUFFIXES, output_file, positive, scene_help, scene_path
+from ._framing import add_camera_file_argument
 
-from ..camera import load_cameras, select_camera
-from ..errors import PathNotFoundError, SketchRodGSError
-from ..extract import extract_rod
-from ..images import draw_overlay, save_png
-from ..io import load_scene
-from ..jsonfile import read_json
-from ..render import render
-from ._args import positive, scene_path
+if TYPE_CHECKING:
+    import numpy as np
 
 NAME = "extract"
 HELP = "find the 3D polyline of the slender object under a stroke and write it as rod JSON"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", type=scene_path, help="scene file (.ply or .splat), or sample:NAME")
-    parser.add_argument("--camera", required=True, metavar="CAM.json", help="our camera JSON or a 3DGS cameras.json")
-    parser.add_argument("--view", metavar="N|NAME", help="which camera of the file (default: the first)")
+    parser.add_argument("scene", type=scene_path, help=scene_help())
+    add_camera_file_argument(
+        parser, "our camera JSON or a 3DGS cameras.json (default: a training output folder's cameras.json)"
+    )
     parser.add_argument(
         "--stroke",
         required=True,
@@ -47,12 +44,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SIZE",
         help="largest attached part that follows, in scene units (default: half the rod's length)",
     )
-    parser.add_argument("-o", "--output", required=True, metavar="ROD.json", help="rod JSON to write")
-    parser.add_argument("--overlay", metavar="OVERLAY.png", help="also draw the render with stroke, path and polyline")
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        type=output_file(".json"),
+        metavar="ROD.json",
+        help="rod JSON to write (its bindings go beside it, ROD.bindings.npz)",
+    )
+    parser.add_argument(
+        "--overlay",
+        type=output_file(*IMAGE_SUFFIXES),
+        metavar="OVERLAY.png",
+        help="also draw the render with stroke, path and polyline (.png or .jpg)",
+    )
 
 
 def load_stroke(path: str) -> np.ndarray:
     """Read a stroke JSON (`{"points": [[x, y], ...]}` or a bare list) as an (S, 2) array."""
+    import numpy as np
+
+    from ..errors import SketchRodGSError
+    from ..jsonfile import read_json
+
     data = read_json(path)
     points = data.get("points") if isinstance(data, dict) else data
     try:
@@ -65,41 +79,59 @@ def load_stroke(path: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    camera = select_camera(load_cameras(args.camera), args.view, args.camera)
-    stroke = load_stroke(args.stroke)
-    scene = load_scene(args.scene)
-    images = render(scene, camera, outputs="all" if args.overlay else "index")
-    try:
-        extraction = extract_rod(
-            scene,
-            camera,
-            stroke,
-            args.radius,
-            alpha=args.alpha,
-            edge_length=args.edge_length,
-            attach=not args.no_attach,
-            attach_size=args.attach_size,
-            render=images,
-        )
-    except PathNotFoundError as err:
-        if args.overlay:  # show what was found and where it stopped, so the user sees what to change
-            overlay = draw_overlay(
-                images.rgb_image, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", [])
+    from ..camera import select_camera
+    from ..errors import PathNotFoundError
+    from ..extract import bindings_path, extract_rod
+    from ..images import draw_overlay, save_image
+    from ..io import load_scene
+    from ..render import render
+    from ._args import UsageError
+    from ._framing import camera_file, scene_cameras
+    from ._outputs import Outputs
+
+    with Outputs() as outputs:
+        rod_path = outputs.file(args.output, "-o", companions=[bindings_path(args.output)])
+        overlay_path = outputs.file(args.overlay, "--overlay") if args.overlay else None
+        cameras = scene_cameras(args)
+        if not cameras:
+            raise UsageError("give --camera CAM.json (the scene is not a training output folder with a cameras.json)")
+        camera = select_camera(cameras, args.view, camera_file(args) or "")
+        stroke = load_stroke(args.stroke)
+        scene = load_scene(args.scene)
+        images = render(scene, camera, outputs="all" if args.overlay else "index")
+        try:
+            extraction = extract_rod(
+                scene,
+                camera,
+                stroke,
+                args.radius,
+                alpha=args.alpha,
+                edge_length=args.edge_length,
+                attach=not args.no_attach,
+                attach_size=args.attach_size,
+                render=images,
             )
-            save_png(args.overlay, overlay)
-            raise PathNotFoundError(f"{err} (overlay of the stroke and the path so far: {args.overlay})") from None
-        raise
-    extraction.save(args.output)
-    if args.overlay:
-        overlay = draw_overlay(
-            images.rgb_image,
-            camera,
-            extraction.stroke,
-            extraction.pixel_path,
-            extraction.polyline,
-            scene.means[extraction.gaussian_ids],
-        )
-        save_png(args.overlay, overlay)
+        except PathNotFoundError as err:
+            if overlay_path is not None:  # show what was found and where it stopped, so the user sees what to change
+                overlay = draw_overlay(
+                    images.rgb_image, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", [])
+                )
+                save_image(overlay_path, overlay)
+                outputs.commit(args.overlay)
+                raise PathNotFoundError(f"{err} (overlay of the stroke and the path so far: {args.overlay})") from None
+            raise
+        extraction.save(rod_path)
+        if overlay_path is not None:
+            overlay = draw_overlay(
+                images.rgb_image,
+                camera,
+                extraction.stroke,
+                extraction.pixel_path,
+                extraction.polyline,
+                scene.means[extraction.gaussian_ids],
+            )
+            save_image(overlay_path, overlay)
+        outputs.commit()
     pieces = len(extraction.pixel_path)
     print(
         f"rod: {len(extraction.polyline)} vertices, radius {extraction.radius:.4g}, edge {extraction.edge_length:.4g}; "

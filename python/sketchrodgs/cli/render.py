@@ -1,91 +1,112 @@
-"""`sketchrodgs render SCENE --camera CAM.json -o out.png`: render a view to a PNG (and the index image)."""
+"""`sketchrodgs render SCENE [--camera CAM.json | --orbit AZ,EL ...] -o out.png`: render a view to
+an image (and the index image)."""
 
 from __future__ import annotations
 
 import argparse
-import io
-import json
-import time
-from typing import Any
 
-import numpy as np
-
-from ..atomic import atomic_open
-from ..camera import load_cameras, select_camera
-from ..errors import SketchRodGSError
-from ..images import save_png
-from ..io import load_scene
-from ..render import render
-from ._args import number_triple, scene_path
+from ._args import IMAGE_SUFFIXES, numbers, output_file, positive, scene_help, scene_path
+from ._framing import add_camera_file_argument, add_framing_arguments
 
 NAME = "render"
-HELP = "render a scene for a camera to a PNG, optionally with the index image K and its depth Z (.npz)"
-
-
-def _side(value: str) -> int:
-    try:
-        side = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of pixels, got {value!r}") from None
-    if side < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1 pixel, got {side}")
-    return side
+HELP = "render a scene for a camera to a PNG or JPEG, optionally with the index image K and its depth Z (.npz)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", type=scene_path, help="scene file (.ply or .splat), or sample:NAME")
-    parser.add_argument(
-        "--camera",
-        required=True,
-        metavar="CAM.json",
-        help='our camera JSON (one camera or {"cameras": [...]}) or a 3DGS cameras.json',
+    parser.add_argument("scene", type=scene_path, help=scene_help())
+    add_camera_file_argument(
+        parser,
+        'our camera JSON (one camera or {"cameras": [...]}) or a 3DGS cameras.json (default: the '
+        "training output folder's cameras.json; without one, or with a framing option, a camera "
+        "framing the scene as `sketchrodgs camera` makes, up taken from these cameras)",
     )
     parser.add_argument(
-        "--view", metavar="N|NAME", help="which camera of the file: position or name (default: the first)"
-    )
-    parser.add_argument(
-        "-o", "--output", metavar="OUT.png", help="colour image to write (8-bit RGB, clamped to [0, 1])"
+        "-o",
+        "--output",
+        type=output_file(*IMAGE_SUFFIXES),
+        metavar="OUT.png",
+        help="colour image to write, .png or .jpg (8-bit RGB, clamped to [0, 1])",
     )
     parser.add_argument(
         "--index",
+        type=output_file(".npz"),
         metavar="OUT.npz",
         help="write index (int32, -1 = none), index_depth, alpha, depth and the camera as .npz",
     )
-    parser.add_argument("--width", type=_side, help="render at this width (focal lengths scale with it)")
-    parser.add_argument("--height", type=_side, help="render at this height (default: keeps the aspect ratio)")
     parser.add_argument(
         "--background",
-        type=number_triple("R,G,B"),
+        type=numbers(3, "R,G,B"),
         default=(0.0, 0.0, 0.0),
         metavar="R,G,B",
         help="background colour in [0, 1] (default 0,0,0)",
     )
+    parser.add_argument(
+        "--near",
+        type=positive,
+        default=0.2,
+        metavar="Z",
+        help="Gaussians nearer to the camera than this (camera z, scene units) are not drawn (default 0.2, "
+        "as the reference 3DGS renderer; lower it for close-ups of small scenes)",
+    )
+    add_framing_arguments(parser, default_size=None)
+    parser.epilog = (
+        "--width/--height resize a camera from a file (focal lengths scale; the aspect is kept if one is given)."
+    )
 
 
 def run(args: argparse.Namespace) -> int:
+    import io
+    import json
+    import sys
+    import time
+    from typing import Any
+
+    import numpy as np
+
+    from ..atomic import atomic_open
+    from ..camera import select_camera
+    from ..errors import SketchRodGSError
+    from ..images import save_image
+    from ..io import load_scene
+    from ..near_plane import render_near, why_nothing_is_visible
+    from ._framing import camera_file, framed_camera, framing_given, scene_cameras
+    from ._outputs import Outputs
+
     if not args.output and not args.index:
         raise SketchRodGSError("nothing to write: give -o OUT.png and/or --index OUT.npz")
-    camera = select_camera(load_cameras(args.camera), args.view, args.camera)
-    if args.width or args.height:
-        width = args.width or max(1, round(camera.width * args.height / camera.height))
-        camera = camera.resized(width, args.height)
-    scene = load_scene(args.scene)
-    start = time.perf_counter()
-    result = render(scene, camera, background=args.background, outputs="all" if args.output else "index")
-    elapsed = time.perf_counter() - start
-    if args.output:
-        save_png(args.output, result.rgb_image)
-    if args.index:
-        arrays: dict[str, Any] = {"index": result.index, "index_depth": result.index_depth, "alpha": result.alpha}
-        if result.depth is not None:
-            arrays.update(depth=result.depth)
-        buffer = io.BytesIO()
-        np.savez_compressed(buffer, camera=np.array(json.dumps(camera.to_dict())), **arrays)
-        with atomic_open(args.index) as stream:
-            stream.write(buffer.getvalue())
+    with Outputs() as outputs:
+        image_path = outputs.file(args.output, "-o") if args.output else None
+        index_path = outputs.file(args.index, "--index") if args.index else None
+        cameras = scene_cameras(args)
+        framed = framing_given(args) or not cameras
+        if not framed:
+            camera = select_camera(cameras, args.view, camera_file(args) or "")
+            if args.width or args.height:
+                width = args.width or max(1, round(camera.width * args.height / camera.height))
+                camera = camera.resized(width, args.height)
+        scene = load_scene(args.scene)
+        if framed:
+            camera, _ = framed_camera(args, scene, cameras)
+        start = time.perf_counter()
+        outputs_wanted = "all" if args.output else "index"
+        result = render_near(scene, camera, args.near, background=args.background, outputs=outputs_wanted)
+        elapsed = time.perf_counter() - start
+        if image_path is not None:
+            save_image(image_path, result.rgb_image)
+        if index_path is not None:
+            arrays: dict[str, Any] = {"index": result.index, "index_depth": result.index_depth, "alpha": result.alpha}
+            if result.depth is not None:
+                arrays.update(depth=result.depth)
+            buffer = io.BytesIO()
+            np.savez_compressed(buffer, camera=np.array(json.dumps(camera.to_dict())), **arrays)
+            with atomic_open(index_path) as stream:
+                stream.write(buffer.getvalue())
+        outputs.commit()
     covered = float((result.index >= 0).mean())
     print(
         f"rendered {len(scene):,} Gaussians ({result.n_visible:,} visible) at {camera.width}x{camera.height} "
         f"in {elapsed * 1e3:.1f} ms; {covered:.1%} of pixels covered"
     )
+    if covered == 0:
+        print(f"sketchrodgs render: warning: {why_nothing_is_visible(scene, camera, args.near)}", file=sys.stderr)
     return 0

@@ -3,13 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import time
 
-from ..camera import load_cameras, select_camera
-from ..extract import load_rod
-from ..io import load_scene
-from ..rod import RodParams
-from ._args import scene_path
+from ._args import scene_help, scene_path
+from ._framing import UP_CHOICES
 
 NAME = "view"
 HELP = "serve the interactive viewer (orbit, sketch a rod, pull it) as a local web page"
@@ -36,9 +32,7 @@ def _fps(value: str) -> float:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..viewer.app import UP_DIRECTIONS
-
-    parser.add_argument("scene", type=scene_path, help="scene file, or sample:NAME")
+    parser.add_argument("scene", type=scene_path, help=scene_help())
     parser.add_argument(
         "--port", type=_port, default=8080, help="port to serve on (default 8080; the next free one if taken)"
     )
@@ -53,18 +47,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         default=[],
         metavar="ROD.json",
-        help="start with these rods (files written by `extract` or the viewer)",
+        help="start with these rods (files written by `extract` or the viewer, for this scene)",
     )
     parser.add_argument(
         "--up",
-        choices=sorted(UP_DIRECTIONS),
-        default="-y",
-        help="the scene's up direction (default -y, as in COLMAP-derived captures)",
+        choices=UP_CHOICES,
+        help="the scene's up direction (default: the training cameras', else a guess from the shape: see `info`)",
     )
     parser.add_argument(
         "--camera",
         metavar="CAM.json",
-        help="open the page at this camera (default: the first rod's, else framing the scene)",
+        help="open the page at this camera (default: the first rod's, else the training output folder's "
+        "first camera, else one framing the scene)",
     )
     parser.add_argument("--view", metavar="N|NAME", help="which camera of --camera (default: the first)")
     parser.add_argument(
@@ -81,12 +75,46 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-clamp", action="store_true", help="leave rod ends free instead of clamping them")
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..viewer import ViewerApp
+class _Stopped(Exception):
+    """SIGTERM (or SIGINT) arrived: stop serving and close."""
 
-    scene = load_scene(args.scene)
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, frame: object) -> None:
+    raise _Stopped(signum)
+
+
+def run(args: argparse.Namespace) -> int:
+    import signal
+    import sys
+    import time
+
+    from ..camera import select_camera
+    from ..extract import load_rod
+    from ..framing import frame_scene, scene_up
+    from ..io import load_scene
+    from ..rod import RodParams
+    from ..scene_identity import check_rod_scene
+    from ..viewer import ViewerApp
+    from ._framing import camera_file, scene_cameras
+    from ._outputs import check_folder
+
+    check_folder(args.output_dir, "-o")
     loaded = [load_rod(path) for path in args.rod]
-    camera = select_camera(load_cameras(args.camera), args.view, args.camera) if args.camera else None
+    cameras = scene_cameras(args)
+    scene = load_scene(args.scene)
+    for path, (extraction, _) in zip(args.rod, loaded):
+        check_rod_scene(extraction.scene_identity, scene, path, args.scene)
+    up = scene_up(scene, cameras, args.up)
+    if args.camera:
+        camera = select_camera(cameras, args.view, camera_file(args) or "")
+    elif loaded:
+        camera = loaded[0][0].camera
+    else:
+        camera = cameras[0] if cameras else frame_scene(scene, up.vector)
     params = RodParams.from_dict({**loaded[0][1], "radius": RodParams().radius}) if loaded and loaded[0][1] else None
     app = ViewerApp(
         scene,
@@ -95,18 +123,28 @@ def run(args: argparse.Namespace) -> int:
         rods=[e for e, _ in loaded],
         params=params,
         clamp_ends=not args.no_clamp,
-        up=args.up,
+        up=up.axis,
         camera=camera,
         output_dir=args.output_dir,
         fps=args.fps,
         splat_update=args.splat_update,
     )
+    # Stop cleanly on SIGTERM, and on SIGINT unless it is ignored (a background job's is): a
+    # server that only Ctrl-C stops cannot be stopped in the background.
+    handled = [signal.SIGTERM] + ([signal.SIGINT] if signal.getsignal(signal.SIGINT) != signal.SIG_IGN else [])
+    previous = {s: signal.signal(s, _stop) for s in handled}
     try:
         print(
-            f"sketchrodgs viewer: {app.url}  ({len(scene):,} Gaussians, {len(loaded)} rod(s); Ctrl-C to stop)",
+            f"sketchrodgs viewer: {app.url}  ({len(scene):,} Gaussians, {len(loaded)} rod(s), up {up.axis}; "
+            "Ctrl-C to stop)",
             flush=True,
         )
         while True:
             time.sleep(3600)
+    except _Stopped as stop:
+        print("stopped" if stop.signum == signal.SIGTERM else "interrupted", file=sys.stderr)
+        return 128 + stop.signum
     finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         app.close()

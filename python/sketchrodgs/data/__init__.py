@@ -9,11 +9,14 @@ import json
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from ..camera import Camera
 from ..errors import SketchRodGSError
+
+if TYPE_CHECKING:  # imported when used: the command line lists the samples without numpy
+    import numpy as np
+
+    from ..camera import Camera
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,8 @@ def sample(name: str = "ring") -> Path:
 
 def sample_camera(name: str) -> Camera:
     """The prepared view of a sample."""
+    from ..camera import Camera
+
     entry = _entry(name)
     if entry.camera is None:
         raise SketchRodGSError(f"sample {name!r} has no prepared view")
@@ -60,6 +65,8 @@ def sample_camera(name: str) -> Camera:
 
 def sample_stroke(name: str) -> np.ndarray:
     """(S, 2) the prepared stroke of a sample, in pixels of `sample_camera(name)`."""
+    import numpy as np
+
     entry = _entry(name)
     if entry.stroke is None:
         raise SketchRodGSError(f"sample {name!r} has no prepared stroke")

@@ -3,7 +3,8 @@
 Readers: INRIA 3DGS `.ply` (binary or ASCII, SH degree 0..3), the PlayCanvas/SuperSplat
 compressed `.ply`, antimatter15 `.splat` and Niantic `.spz` (versions 2 to 4).
 Writers: `.ply` (lossless for float32 values) and `.splat` (lossy: 8-bit colour, opacity and
-rotation, no SH beyond the DC term).
+rotation, no SH beyond the DC term). A 3DGS training output folder stands for its latest point
+cloud (`training_output.py`).
 """
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ from pathlib import Path
 from ..errors import SceneFileNotFoundError, SceneFormatError
 from ..scene import GaussianScene
 from . import compressed_ply, ply, splat, spz
+from .training_output import scene_file, training_cameras
 
-__all__ = ["FORMAT_NAMES", "detect_format", "load_scene", "save_scene"]
+__all__ = ["FORMAT_NAMES", "detect_format", "load_scene", "save_scene", "scene_file", "training_cameras"]
 
 _READERS = {
     "ply": ply.read_ply,
@@ -40,8 +42,9 @@ def detect_format(path: str | os.PathLike[str]) -> str:
 
     A PLY header with a `chunk` element is a compressed PLY; gzip data or `NGSP` is SPZ. `.splat`
     has no magic number, so a file is taken as `.splat` when it is none of these and its name
-    ends in `.splat`.
+    ends in `.splat`. A 3DGS training output folder is judged by its latest point cloud.
     """
+    path = scene_file(path)
     try:
         with open(path, "rb") as stream:
             head = stream.read(_HEAD_BYTES)
@@ -75,12 +78,14 @@ def _gzipped_spz(head: bytes) -> bool:
 
 
 def load_scene(path: str | os.PathLike[str]) -> GaussianScene:
-    """Read a scene file (format chosen from its content).
+    """Read a scene file (format chosen from its content), or the latest point cloud of a 3DGS
+    training output folder (`point_cloud/iteration_<highest>/point_cloud.ply`).
 
     Raises:
         SceneFormatError: the file is unreadable or malformed; the message names the file and what
             is wrong with it.
     """
+    path = scene_file(path)
     return _READERS[detect_format(path)](path)
 
 
