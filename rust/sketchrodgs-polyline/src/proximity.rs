@@ -1,18 +1,21 @@
 //! Which points of a cloud are linked: two points are neighbours when they are at most `link`
-//! apart, and a gap wider than that separates parts. Segmentation (docs/deformation.md) grows the
-//! part over these links and finds the small parts attached to it.
+//! apart, and a gap wider than that separates parts. Segmentation (docs/deformation.md,
+//! `crate::segment`) grows the part over these links and finds the small parts attached to it.
 //!
-//! Points fall in a uniform grid of cells at least `link` wide (see `Grid`). Points are linked
-//! only within their group (a `u8`); `EXCLUDED` points have no links. The answers do not depend on
-//! the order of work.
+//! Points fall in a uniform grid of cells as wide as the link (or, growing a part, as its largest
+//! link; see `Grid`): two points are linked when their cells are next to each other (27 cells
+//! around a cell) and their `f32` squared distance is at most the link's. Points are linked only
+//! within their group (a `u8`); `EXCLUDED` points have no links. The answers do not depend on the
+//! order of work.
 //!
 //! ```
-//! use sketchrodgs_polyline::proximity::{linked_components, linked_to, EXCLUDED};
+//! use sketchrodgs_polyline::proximity::{grow, linked_to, ELIGIBLE, EXCLUDED, OTHER, SEED};
 //! let points = [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.5, 0.0, 0.0], [0.6, 0.0, 0.0]];
-//! let labels = linked_components(&points, &[0, 0, 0, EXCLUDED], 0.15).unwrap();
-//! assert_eq!(labels, [0, 0, 1, u32::MAX]); // a gap of 0.4 between the first two and the third
-//! let contact = linked_to(&points, &[0, 0, 1, 1], 0, 1, 0.45).unwrap();
+//! let contact = linked_to(&points, &[0, 0, 1, EXCLUDED], 0, 1, 0.45).unwrap();
 //! assert_eq!(contact, [None, Some(2), None, None]); // point 1 reaches point 2 of group 1
+//! let grown = grow(&points, &[SEED, ELIGIBLE, ELIGIBLE, OTHER], 1.5, 0.15, 0.15).unwrap();
+//! assert_eq!(grown.part, [true, true, false, false]); // a gap of 0.4 after the second
+//! assert!(!grown.touched);
 //! ```
 
 use std::ops::Range;
@@ -176,8 +179,16 @@ pub(crate) struct Grid {
 }
 
 impl Grid {
-    /// The grid of `points` (those not `EXCLUDED`), cells `width` wide.
+    /// The grid of `points` (those not `EXCLUDED`), cells `width` wide, with the runs around
+    /// every cell.
     pub(crate) fn new(points: &[[f32; 3]], group: &[u8], width: f32) -> Result<Self, ProximityError> {
+        let mut grid = Self::sorted(points, group, width)?;
+        grid.around = grid.neighbourhoods(&grid.cells);
+        Ok(grid)
+    }
+
+    /// The grid without the runs around its cells (`Links` finds those of the cells it visits).
+    fn sorted(points: &[[f32; 3]], group: &[u8], width: f32) -> Result<Self, ProximityError> {
         if !(width.is_finite() && width > 0.0) {
             return Err(ProximityError::BadLink(width));
         }
@@ -270,7 +281,6 @@ impl Grid {
             );
         }
         grid.starts.push(members.len() as u32);
-        grid.around = grid.neighbourhoods(&grid.cells);
         Ok(grid)
     }
 
@@ -306,22 +316,30 @@ impl Grid {
     /// For each of `query` (cell keys in ascending order), the runs of points in the 9 columns
     /// around it: every point within a cell width of any point of the query cell. The first cell
     /// of a column at or after (x + dx, y + dy, z - 1) only moves forwards as the query cells
-    /// rise, so each column is one pass.
+    /// rise, so each column is one pass (per block of queries, in parallel: a block's first seeks
+    /// gallop from the start).
     fn neighbourhoods(&self, query: &[CellKey]) -> Vec<Neighbourhood> {
+        const BLOCK: usize = 1024;
         let (cells, starts) = (&self.cells, &self.starts);
-        let (mut first, mut end) = ([0; 9], [0; 9]);
-        query
-            .iter()
-            .map(|&q| {
-                std::array::from_fn(|c| {
-                    // codes stay within their fields (see `Codes`): no carries between them
-                    let centre = q.wrapping_add_signed(self.columns[c]);
-                    first[c] = seek(cells, first[c], centre - 1, false);
-                    end[c] = seek(cells, end[c].max(first[c]), centre + 1, true);
-                    starts[first[c]]..starts[end[c]]
+        let sweep = |block: &[CellKey]| {
+            let (mut first, mut end) = ([0; 9], [0; 9]);
+            block
+                .iter()
+                .map(|&q| {
+                    std::array::from_fn(|c| {
+                        // codes stay within their fields (see `Codes`): no carries between them
+                        let centre = q.wrapping_add_signed(self.columns[c]);
+                        first[c] = seek(cells, first[c], centre - 1, false);
+                        end[c] = seek(cells, end[c].max(first[c]), centre + 1, true);
+                        starts[first[c]]..starts[end[c]]
+                    })
                 })
-            })
-            .collect()
+                .collect::<Vec<Neighbourhood>>()
+        };
+        if query.len() <= BLOCK {
+            return sweep(query);
+        }
+        query.par_chunks(BLOCK).flat_map_iter(sweep).collect()
     }
 
     /// The runs of sorted points in the 27 cells around sorted point `k` (itself included).
@@ -333,23 +351,9 @@ impl Grid {
     /// whether one did. (Plain loops over slices: the candidates are the inner loop of every
     /// query.)
     #[inline]
-    fn find_in(&self, runs: &Neighbourhood, visit: impl FnMut(usize, [f32; 3], u8) -> bool) -> bool {
-        self.find_in_from(runs, 0, visit)
-    }
-
-    /// `find_in` over the sorted points from `first` on.
-    #[inline]
-    fn find_in_from(
-        &self,
-        runs: &Neighbourhood,
-        first: usize,
-        mut visit: impl FnMut(usize, [f32; 3], u8) -> bool,
-    ) -> bool {
+    fn find_in(&self, runs: &Neighbourhood, mut visit: impl FnMut(usize, [f32; 3], u8) -> bool) -> bool {
         for run in runs {
-            let (start, end) = ((run.start as usize).max(first), run.end as usize);
-            if start >= end {
-                continue;
-            }
+            let (start, end) = (run.start as usize, run.end as usize);
             for ((j, &p), &g) in (start..end).zip(&self.points[start..end]).zip(&self.group[start..end]) {
                 if visit(j, p, g) {
                     return true;
@@ -383,53 +387,6 @@ fn seek(keys: &[CellKey], mut at: usize, target: CellKey, or_equal: bool) -> usi
         step *= 2;
     }
     at + keys[at..(at + step).min(keys.len())].partition_point(|&k| below(k))
-}
-
-fn find(parent: &mut [u32], mut i: u32) -> u32 {
-    while parent[i as usize] != i {
-        let up = parent[parent[i as usize] as usize];
-        parent[i as usize] = up; // path halving
-        i = up;
-    }
-    i
-}
-
-/// The connected component of every point, over links within `link` between points of the same
-/// group: labels 0, 1, ... in the order of each component's first point; `u32::MAX` for
-/// `EXCLUDED` points.
-pub fn linked_components(points: &[[f32; 3]], group: &[u8], link: f32) -> Result<Vec<u32>, ProximityError> {
-    let grid = Grid::new(points, group, link)?;
-    let link2 = link * link;
-    let mut parent: Vec<u32> = (0..grid.len() as u32).collect();
-    for a in 0..grid.len() {
-        let (q, group) = (grid.points[a], grid.group[a]);
-        // each pair once, from its earlier point
-        grid.find_in_from(grid.around_point(a), a + 1, |b, p, g| {
-            if g == group && distance2(q, p) <= link2 {
-                let (ra, rb) = (find(&mut parent, a as u32), find(&mut parent, b as u32));
-                parent[ra.max(rb) as usize] = ra.min(rb);
-            }
-            false
-        });
-    }
-    // labels in the order of the input: a component's label is the rank of its first point
-    let mut root_of = vec![u32::MAX; points.len()];
-    for k in 0..grid.len() {
-        root_of[grid.index[k] as usize] = find(&mut parent, k as u32);
-    }
-    let mut label_of_root = vec![u32::MAX; grid.len()];
-    let mut next = 0;
-    Ok(root_of
-        .into_iter()
-        .map(|root| {
-            let Some(label) = label_of_root.get_mut(root as usize) else { return u32::MAX };
-            if *label == u32::MAX {
-                *label = next;
-                next += 1;
-            }
-            *label
-        })
-        .collect())
 }
 
 /// For each point of group `from`, the lowest-numbered point of group `to` within `link` (None
@@ -466,6 +423,48 @@ pub fn linked_to(
         found[grid.index[k] as usize] = answer;
     }
     Ok(found)
+}
+
+/// The links among points (within `link`, in cells `link` wide), found point by point: searching outward from a few points of a large cloud costs only
+/// the cells searched (the runs around a cell are found when first asked for).
+pub(crate) struct Links {
+    grid: Grid,
+    link: f32,
+    /// The sorted position of each input point.
+    sorted_at: Vec<u32>,
+    /// The runs around each cell asked for so far (`u32::MAX`: not yet), in `runs`.
+    runs_at: Vec<u32>,
+    runs: Vec<Neighbourhood>,
+}
+
+impl Links {
+    pub(crate) fn new(points: &[[f32; 3]], link: f32) -> Result<Self, ProximityError> {
+        let grid = Grid::sorted(points, &vec![0; points.len()], link)?;
+        let mut sorted_at = vec![0; points.len()];
+        for (k, &i) in grid.index.iter().enumerate() {
+            sorted_at[i as usize] = k as u32;
+        }
+        let runs_at = vec![u32::MAX; grid.cells.len()];
+        Ok(Self { grid, link, sorted_at, runs_at, runs: Vec::new() })
+    }
+
+    /// Adds to `linked` the input points linked to input point `i` (itself excluded).
+    pub(crate) fn linked_to(&mut self, i: usize, linked: &mut Vec<usize>) {
+        let k = self.sorted_at[i] as usize;
+        let cell = self.grid.point_cell[k] as usize;
+        if self.runs_at[cell] == u32::MAX {
+            self.runs_at[cell] = self.runs.len() as u32;
+            let around = self.grid.neighbourhoods(&self.grid.cells[cell..=cell]);
+            self.runs.extend(around);
+        }
+        let (grid, q, link2) = (&self.grid, self.grid.points[k], self.link * self.link);
+        grid.find_in(&self.runs[self.runs_at[cell] as usize], |j, p, _| {
+            if j != k && distance2(q, p) <= link2 {
+                linked.push(grid.index[j] as usize);
+            }
+            false
+        });
+    }
 }
 
 /// Point kinds for [`grow`].
@@ -684,12 +683,38 @@ mod tests {
         (0..20).map(|i| [i as f32 * 0.1 + if i >= 10 { 0.5 } else { 0.0 }, 0.0, 0.0]).collect()
     }
 
+    /// The component of every point over `Links`: labels 0, 1, ... in the order of each
+    /// component's first point.
+    fn components(points: &[[f32; 3]], link: f32) -> Vec<u32> {
+        let mut links = Links::new(points, link).unwrap();
+        let (mut label, mut next, mut linked) = (vec![u32::MAX; points.len()], 0, Vec::new());
+        for start in 0..points.len() {
+            if label[start] != u32::MAX {
+                continue;
+            }
+            let mut stack = vec![start];
+            label[start] = next;
+            while let Some(i) = stack.pop() {
+                linked.clear();
+                links.linked_to(i, &mut linked);
+                for &j in &linked {
+                    if label[j] == u32::MAX {
+                        label[j] = next;
+                        stack.push(j);
+                    }
+                }
+            }
+            next += 1;
+        }
+        label
+    }
+
     #[test]
     fn a_gap_wider_than_the_link_separates_components() {
         let points = chain();
-        let labels = linked_components(&points, &[0; 20], 0.15).unwrap();
+        let labels = components(&points, 0.15);
         assert!(labels[..10].iter().all(|&l| l == 0) && labels[10..].iter().all(|&l| l == 1));
-        let bridged = linked_components(&points, &[0; 20], 0.65).unwrap();
+        let bridged = components(&points, 0.65);
         assert!(bridged.iter().all(|&l| l == 0));
     }
 
@@ -697,10 +722,6 @@ mod tests {
     fn groups_do_not_link_to_each_other() {
         let points = chain();
         let group: Vec<u8> = (0..20).map(|i| if i % 10 < 5 { 0 } else { 1 }).collect();
-        let labels = linked_components(&points, &group, 0.15).unwrap();
-        assert_eq!(labels[0], labels[4]);
-        assert_ne!(labels[4], labels[5]);
-        assert_ne!(labels[9], labels[10]); // both group 1 but across the gap
         let contact = linked_to(&points, &group, 0, 1, 0.15).unwrap();
         assert_eq!(contact[4], Some(5));
         assert_eq!(contact[3], None);
@@ -719,11 +740,11 @@ mod tests {
         let points: Vec<[f32; 3]> = (0..400).map(|_| [next(), next(), next() * 0.2]).collect();
         let group: Vec<u8> = (0..400).map(|i| if i % 7 == 0 { EXCLUDED } else { (i % 2) as u8 }).collect();
         let link = 0.08;
-        let labels = linked_components(&points, &group, link).unwrap();
+        let labels = components(&points, link);
         for i in 0..400 {
             for j in 0..400 {
                 let d2: f32 = (0..3).map(|k| (points[i][k] - points[j][k]).powi(2)).sum();
-                if group[i] != EXCLUDED && group[i] == group[j] && d2 <= link * link {
+                if d2 <= link * link {
                     assert_eq!(labels[i], labels[j]);
                 }
             }
@@ -731,7 +752,7 @@ mod tests {
         // and no two components are linked: every label's points are a flood fill of its first
         let mut seen = vec![false; 400];
         for start in 0..400 {
-            if seen[start] || group[start] == EXCLUDED {
+            if seen[start] {
                 continue;
             }
             let mut stack = vec![start];
@@ -740,20 +761,19 @@ mod tests {
                 assert_eq!(labels[i], labels[start]);
                 for j in 0..400 {
                     let d2: f32 = (0..3).map(|k| (points[i][k] - points[j][k]).powi(2)).sum();
-                    if !seen[j] && group[j] == group[i] && d2 <= link * link {
+                    if !seen[j] && d2 <= link * link {
                         seen[j] = true;
                         stack.push(j);
                     }
                 }
             }
         }
-        assert!(labels.iter().zip(&group).all(|(&l, &g)| (l == u32::MAX) == (g == EXCLUDED)));
         // a far-away point changes nothing
         let mut spread = points.clone();
         spread.push([1.0e5, -1.0e5, 3.0e4]);
         let mut spread_group = group.clone();
         spread_group.push(0);
-        assert_eq!(&linked_components(&spread, &spread_group, link).unwrap()[..400], &labels[..]);
+        assert_eq!(&components(&spread, link)[..400], &labels[..]);
         assert_eq!(
             linked_to(&spread, &spread_group, 0, 1, link).unwrap()[..400],
             linked_to(&points, &group, 0, 1, link).unwrap()[..]
@@ -818,7 +838,7 @@ mod tests {
         let link = 0.05_f32;
         let linked = |i: usize, j: usize| distance2(points[i], points[j]) <= link * link;
         // components: every linked pair shares a label, and each label is one flood fill
-        let labels = linked_components(&points, &[0; 600], link).unwrap();
+        let labels = components(&points, link);
         let mut seen = vec![false; 600];
         for start in 0..600 {
             if seen[start] {
@@ -875,8 +895,9 @@ mod tests {
     #[test]
     fn bad_input_is_an_error() {
         let points = chain();
-        assert_eq!(linked_components(&points, &[0; 20], 0.0).unwrap_err(), ProximityError::BadLink(0.0));
-        assert!(matches!(linked_components(&points, &[0; 3], 0.1), Err(ProximityError::GroupCount { .. })));
+        assert_eq!(linked_to(&points, &[0; 20], 0, 1, 0.0).unwrap_err(), ProximityError::BadLink(0.0));
+        assert!(matches!(linked_to(&points, &[0; 3], 0, 1, 0.1), Err(ProximityError::GroupCount { .. })));
+        assert!(matches!(Links::new(&points, f32::NAN), Err(ProximityError::BadLink(_))));
         let mut bad = chain();
         bad[3][1] = f32::NAN;
         assert_eq!(linked_to(&bad, &[0; 20], 0, 1, 0.1).unwrap_err(), ProximityError::NonFinitePoint(3));

@@ -198,24 +198,29 @@ impl Rod<'_> {
         let low = bound(f64::min, f64::INFINITY, -reach).map(|c| (c as f32).next_down());
         let high = bound(f64::max, f64::NEG_INFINITY, reach).map(|c| (c as f32).next_up());
         let mut rows = rows_in_box(self.means, low, high);
-        let mut skip = except.iter().peekable();
-        rows.retain(|&r| {
-            while skip.next_if(|&&e| e < r).is_some() {}
-            skip.peek() != Some(&&r)
-        });
+        if !except.is_empty() {
+            let mut skip = except.iter().peekable();
+            rows.retain(|&r| {
+                while skip.next_if(|&&e| e < r).is_some() {}
+                skip.peek() != Some(&&r)
+            });
+        }
         let points: Vec<[f32; 3]> = rows.iter().map(|&r| self.means[r as usize]).collect();
         let found = nearest_on_polyline(&self.polyline32, &points, reach)?;
         let reach32 = reach as f32;
-        let kept: Vec<(usize, Nearest)> = found
-            .into_iter()
-            .enumerate()
-            .filter_map(|(k, n)| Some((k, n.filter(|n| !rounded_too || n.distance <= reach32)?)))
-            .collect();
-        let centres = Centres {
-            rows: kept.iter().map(|&(k, _)| rows[k]).collect(),
-            points: kept.iter().map(|&(k, _)| points[k]).collect(),
-            nearest: kept.into_iter().map(|(_, n)| n).collect(),
+        let count = found.iter().flatten().count();
+        let mut centres = Centres {
+            rows: Vec::with_capacity(count),
+            points: Vec::with_capacity(count),
+            nearest: Vec::with_capacity(count),
         };
+        for (k, nearest) in found.into_iter().enumerate() {
+            if let Some(n) = nearest.filter(|n| !rounded_too || n.distance <= reach32) {
+                centres.rows.push(rows[k]);
+                centres.points.push(points[k]);
+                centres.nearest.push(n);
+            }
+        }
         Ok(centres)
     }
 }
@@ -227,6 +232,12 @@ impl Rod<'_> {
 /// it touches the part, none of it comes within a link of the searched region's edge (`reach`
 /// less a link from the axis; a large body runs on past it), and it fits in a ball of
 /// `attach_size` around where it joins: the contact of its first row that has one.
+///
+/// Only the components that touch the part matter, so they are searched outward from their
+/// touching rows, lowest first (the first search in a component starts at its first touching
+/// row), and a search stops at the first row that makes its component large, leaving the rest
+/// of the component unsearched: a later search that meets one of its rows learns that its
+/// component is large, and one that does not meet any finds a row that shows it.
 fn attached_parts(
     near: &Centres,
     around: &Centres,
@@ -249,7 +260,6 @@ fn attached_parts(
         Some(a) => (around.points[a], around.nearest[a].distance),
     };
     let (points, distance): (Vec<[f32; 3]>, Vec<f32>) = others.iter().map(|&row| of(row)).unzip();
-    let label = proximity::linked_components(&points, &vec![0; others.len()], part.link)?;
     // The part row each other row reaches. The part lies within `part_reach` of the axis, so
     // only rows within a link more can reach it (a margin of 1e-5 covers the rounding of the
     // distances, 1e-7 of them): the around rows, past `part_reach + link_max`, never do unless
@@ -257,44 +267,73 @@ fn attached_parts(
     let within = ((part_reach + f64::from(part.link)) * (1.0 + 1e-5)) as f32;
     let asked: Vec<usize> = (0..others.len()).filter(|&o| distance[o] <= within).collect();
     let asked_points: Vec<[f32; 3]> = asked.iter().map(|&o| points[o]).collect();
-    let mut touch = vec![None; others.len()];
-    for (o, found) in asked.into_iter().zip(part.lowest_touching(&asked_points)?) {
-        touch[o] = found;
-    }
-    // each component's contact, and whether it is small
-    let count = label.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
-    let mut contact_of: Vec<Option<u32>> = vec![None; count];
-    for (&l, &touch) in label.iter().zip(&touch) {
-        if contact_of[l as usize].is_none() {
-            contact_of[l as usize] = touch;
-        }
-    }
-    let mut small: Vec<bool> = contact_of.iter().map(Option::is_some).collect();
-    let shell = (reach - f64::from(part.link)) as f32;
-    for (&l, &d) in label.iter().zip(&distance) {
-        if d > shell {
-            small[l as usize] = false; // reaches the edge
-        }
-    }
-    // the spread as NumPy's norm in float32 measures it: ((x^2 + y^2) + z^2), rooted
-    let size = attach_size as f32;
-    let too_big: Vec<u32> = points
-        .par_iter()
-        .zip(&label)
-        .filter_map(|(&p, &l)| {
-            let q = near.points[contact_of[l as usize].filter(|_| small[l as usize])? as usize];
-            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-            ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() > size).then_some(l)
-        })
+    let touching: Vec<(usize, u32)> = asked
+        .into_iter()
+        .zip(part.lowest_touching(&asked_points)?)
+        .filter_map(|(o, contact)| Some((o, contact?)))
         .collect();
-    for l in too_big {
-        small[l as usize] = false; // does not fit
+    // a row makes its component large: past the shell, or farther from the contact than the
+    // size (the spread as NumPy's norm in float32 measures it: ((x^2 + y^2) + z^2), rooted)
+    let (shell, size) = ((reach - f64::from(part.link)) as f32, attach_size as f32);
+    let too_far = |o: usize, contact: u32| {
+        let (p, q) = (points[o], near.points[contact as usize]);
+        let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+        distance[o] > shell || (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() > size
+    };
+    let mut links = proximity::Links::new(&points, part.link)?;
+    let mut state = vec![Search::Unseen; others.len()];
+    let (mut joined, mut component, mut stack, mut linked) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (start, contact) in touching {
+        if state[start] != Search::Unseen {
+            continue;
+        }
+        let mut large = false;
+        state[start] = Search::Found;
+        component.clear();
+        stack.push(start);
+        'search: while let Some(o) = stack.pop() {
+            component.push(o);
+            if too_far(o, contact) {
+                large = true;
+                break;
+            }
+            linked.clear();
+            links.linked_to(o, &mut linked);
+            for &j in &linked {
+                match state[j] {
+                    Search::Unseen => {
+                        state[j] = Search::Found;
+                        stack.push(j);
+                    }
+                    Search::Done => {
+                        large = true; // a large component searched in part before
+                        break 'search;
+                    }
+                    Search::Found => {}
+                }
+            }
+        }
+        component.append(&mut stack); // found, not searched from
+        for &o in &component {
+            state[o] = Search::Done;
+        }
+        if !large {
+            joined.extend(component.iter().map(|&o| (others[o], contact)));
+        }
     }
-    Ok(others
-        .iter()
-        .zip(&label)
-        .filter_map(|(&row, &l)| Some((row, contact_of[l as usize].filter(|_| small[l as usize])?)))
-        .collect())
+    joined.sort_unstable();
+    Ok(joined)
+}
+
+/// Where the search for attached parts stands with a row.
+#[derive(Clone, Copy, PartialEq)]
+enum Search {
+    Unseen,
+    /// In the component being searched.
+    Found,
+    /// In a component searched before: a large one (a small one was searched whole, so no later
+    /// search starts in it or reaches it).
+    Done,
 }
 
 /// Drop the attached parts that join within `margin` of a rod end but lie beside the rod rather
@@ -372,7 +411,7 @@ fn bind(rod: &Rod, near: &Centres, around: &Centres, home: &[Option<u32>], attac
         rows: bound.iter().map(|b| b.0).collect(),
         segment: bound.iter().map(|b| near.nearest[b.1 as usize].segment).collect(),
         t: bound.iter().map(|b| near.nearest[b.1 as usize].t).collect(),
-        offset: bound.iter().map(offset).collect(),
+        offset: bound.par_iter().map(offset).collect(),
         distance: bound.iter().map(|b| b.2).collect(),
         attached: bound.iter().map(|b| b.3).collect(),
     }
