@@ -209,15 +209,26 @@ class RodWorld:
 
 def default_rod_params() -> dict[str, Any]: ...
 def default_solver_settings() -> dict[str, Any]: ...
-def linked_components(
-    points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], link: float
-) -> npt.NDArray[np.int64]: ...
-def linked_to(
-    points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], source: int, target: int, link: float
-) -> npt.NDArray[np.int64]: ...
-def grow_part(
-    points: npt.NDArray[np.float32], kind: npt.NDArray[np.uint8], spacings: float, link_min: float, link_max: float
-) -> tuple[float, npt.NDArray[np.bool_], bool]: ...
+def segment_and_bind(
+    polyline: npt.NDArray[np.float64],
+    arc: npt.NDArray[np.float64],
+    length: float,
+    means: npt.NDArray[np.float32],
+    radius: float,
+    grow: float,
+    link_spacings: float,
+    link_min: float,
+    link_max: float,
+    attach_size: float | None,
+    end_margin: float,
+) -> tuple[
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int32],
+    npt.NDArray[np.float32],
+    npt.NDArray[np.float32],
+    npt.NDArray[np.float32],
+    npt.NDArray[np.bool_],
+]: ...
 def skin_scatter(
     rest: npt.NDArray[np.float32],
     deformed: npt.NDArray[np.float32],
