@@ -53,6 +53,9 @@ pub enum RodError {
     /// The time step is not a positive finite number.
     #[error("time step {0} must be positive and finite")]
     InvalidTimeStep(f64),
+    /// A distance field that cannot be used.
+    #[error("distance field: {0}")]
+    InvalidField(String),
     /// A state array of the wrong length.
     #[error("{what} has {got} entries, expected {expected}")]
     LengthMismatch { what: &'static str, got: usize, expected: usize },
