@@ -71,7 +71,7 @@ pub use banded::{BandedMatrix, NotPositiveDefinite};
 pub use contact::{CONTACT_STIFFNESS, Capsule, DistanceField};
 pub use error::RodError;
 pub use params::{RodParams, SolverSettings};
-pub use rod::{Boundary, ElasticRod, Energy, StaticReport, StepReport};
+pub use rod::{Boundary, ElasticRod, Energy, HoldReport, StaticReport, StepReport};
 pub use world::{ContactSettings, World};
 
 pub use glam::{DMat3, DQuat, DVec3};

@@ -14,7 +14,10 @@ use glam::{DMat3, DQuat, DVec3};
 mod assembly;
 mod constraints;
 mod contacts;
+mod hold;
 mod solve;
+
+pub use hold::HoldReport;
 
 /// Half-bandwidth of the Hessian: a bending stencil spans 11 consecutive unknowns.
 const BANDWIDTH: usize = 10;
