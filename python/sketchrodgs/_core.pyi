@@ -75,6 +75,15 @@ def cross_section_centroids(
     half_width: float,
     reach: float,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint32]]: ...
+def max_alpha(
+    means: npt.NDArray[np.float32],
+    scales: npt.NDArray[np.float32],
+    quats: npt.NDArray[np.float32],
+    opacities: npt.NDArray[np.float32],
+    origin: tuple[float, float, float] | list[float],
+    spacing: float,
+    dims: tuple[int, int, int] | list[int],
+) -> npt.NDArray[np.float32]: ...
 def rasterize(
     means: npt.NDArray[np.float32],
     scales: npt.NDArray[np.float32],
@@ -152,6 +161,13 @@ class RodWorld:
 
     def __init__(self) -> None: ...
     def __len__(self) -> int: ...
+    def hold_under_gravity(self, rod: int) -> tuple[int, float]: ...
+    def set_field(
+        self, values: npt.NDArray[np.float32] | None, origin: tuple[float, float, float], spacing: float
+    ) -> None: ...
+    def has_field(self) -> bool: ...
+    def contact(self) -> tuple[bool, bool, float]: ...
+    def set_contact(self, scene: bool, rods: bool, friction: float) -> None: ...
     def add_rod(
         self,
         polyline: npt.NDArray[np.float64],

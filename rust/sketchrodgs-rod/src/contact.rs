@@ -60,8 +60,11 @@ impl DistanceField {
         Ok(Self { origin: DVec3::from_array(origin), spacing, dims, values })
     }
 
-    /// The signed distance at `p` (trilinear) and its gradient, or None outside the grid (no
-    /// contact there).
+    /// The signed distance at `p` and its gradient, or None outside the grid (no contact there).
+    ///
+    /// The field between nodes is the uniform cubic B-spline with the node values as coefficients
+    /// (the nodes beyond the border repeat the border's): twice continuously differentiable, so the
+    /// penalty's gradient has no kinks at cell faces for Newton to stall on, and exact on planes.
     pub fn sample(&self, p: DVec3) -> Option<(f64, DVec3)> {
         let g = (p - self.origin) / self.spacing;
         let [nx, ny, nz] = self.dims;
@@ -69,25 +72,22 @@ impl DistanceField {
         if !(inside(g.x, nx) && inside(g.y, ny) && inside(g.z, nz)) {
             return None;
         }
-        let cell = |v: f64, n: usize| (v.floor() as usize).min(n - 2);
-        let (i, j, k) = (cell(g.x, nx), cell(g.y, ny), cell(g.z, nz));
-        let (fx, fy, fz) = (g.x - i as f64, g.y - j as f64, g.z - k as f64);
-        let at = |di: usize, dj: usize, dk: usize| f64::from(self.values[(i + di) + nx * ((j + dj) + ny * (k + dk))]);
-        let corner = [
-            [[at(0, 0, 0), at(0, 0, 1)], [at(0, 1, 0), at(0, 1, 1)]],
-            [[at(1, 0, 0), at(1, 0, 1)], [at(1, 1, 0), at(1, 1, 1)]],
-        ];
-        let lerp = |a: f64, b: f64, t: f64| a + t * (b - a);
-        // along z, then y, then x; the gradient from the same corners
-        let c = |a: usize, b: usize| lerp(corner[a][b][0], corner[a][b][1], fz);
-        let dz = |a: usize, b: usize| corner[a][b][1] - corner[a][b][0];
-        let (c00, c01, c10, c11) = (c(0, 0), c(0, 1), c(1, 0), c(1, 1));
-        let (c0, c1) = (lerp(c00, c01, fy), lerp(c10, c11, fy));
-        let value = lerp(c0, c1, fx);
-        let gx = c1 - c0;
-        let gy = lerp(c01 - c00, c11 - c10, fx);
-        let gz = lerp(lerp(dz(0, 0), dz(0, 1), fy), lerp(dz(1, 0), dz(1, 1), fy), fx);
-        Some((value, DVec3::new(gx, gy, gz) / self.spacing))
+        let (wx, ix) = spline_weights(g.x, nx);
+        let (wy, iy) = spline_weights(g.y, ny);
+        let (wz, iz) = spline_weights(g.z, nz);
+        let (mut value, mut grad) = (0.0, DVec3::ZERO);
+        for (c, &k) in iz.iter().enumerate() {
+            for (b, &j) in iy.iter().enumerate() {
+                let row = nx * (j + ny * k);
+                for (a, &i) in ix.iter().enumerate() {
+                    let v = f64::from(self.values[row + i]);
+                    let (fx, fy, fz) = (wx[0][a], wy[0][b], wz[0][c]);
+                    value += v * fx * fy * fz;
+                    grad += v * DVec3::new(wx[1][a] * fy * fz, fx * wy[1][b] * fz, fx * fy * wz[1][c]);
+                }
+            }
+        }
+        Some((value, grad / self.spacing))
     }
 
     /// `p` moved out along the field's gradient until it is at least `radius` from the surface
@@ -105,8 +105,60 @@ impl DistanceField {
     }
 }
 
-/// Projection steps of [`DistanceField::push_out`]: a trilinear field is exact after one step
-/// inside a cell; more reach across cells.
+impl DistanceField {
+    /// Moving a point of radius `radius` from `from` towards `to`: where it first comes within its
+    /// radius of the surface, and the surface's normal there; None when the way is clear. Marched
+    /// by the clearance, at least a quarter of a grid spacing a step, then refined by bisection.
+    pub fn first_contact(&self, from: DVec3, to: DVec3, radius: f64) -> Option<(DVec3, DVec3)> {
+        let length = (to - from).length();
+        if length <= 0.0 {
+            return None;
+        }
+        let dir = (to - from) / length;
+        let clearance = |s: f64| self.sample(from + s * dir).map_or(f64::INFINITY, |(d, _)| d - radius);
+        let (mut free, mut s) = (0.0, 0.0);
+        let hit = loop {
+            let c = clearance(s);
+            if c < 0.0 {
+                break s;
+            }
+            if s >= length {
+                return None;
+            }
+            free = s;
+            s = (s + c.max(0.25 * self.spacing)).min(length);
+        };
+        let (mut lo, mut hi) = (free, hit);
+        for _ in 0..BISECTIONS {
+            let mid = 0.5 * (lo + hi);
+            if clearance(mid) < 0.0 { hi = mid } else { lo = mid }
+        }
+        let point = from + lo * dir;
+        let (_, grad) = self.sample(from + hi * dir)?;
+        let len = grad.length();
+        (len > 1e-12).then(|| (point, grad / len))
+    }
+}
+
+/// The cubic B-spline weights (values, then derivatives) of the four nodes around grid coordinate
+/// `g` along an axis of `n` nodes, and those nodes (clamped to the grid).
+fn spline_weights(g: f64, n: usize) -> ([[f64; 4]; 2], [usize; 4]) {
+    let cell = (g.floor() as usize).min(n - 2);
+    let t = g - cell as f64;
+    let u = 1.0 - t;
+    let (t2, t3) = (t * t, t * t * t);
+    let values =
+        [u * u * u / 6.0, (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0, (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0, t3 / 6.0];
+    let slopes = [-0.5 * u * u, 0.5 * (3.0 * t2 - 4.0 * t), 0.5 * (-3.0 * t2 + 2.0 * t + 1.0), 0.5 * t2];
+    let node = |o: isize| (cell as isize + o).clamp(0, n as isize - 1) as usize;
+    ([values, slopes], [node(-1), node(0), node(1), node(2)])
+}
+
+/// Bisection steps that place a contact along a way (to 2^-20 of a step).
+const BISECTIONS: usize = 20;
+
+/// Projection steps of [`DistanceField::push_out`] (each is exact on a plane; more follow curved
+/// surfaces).
 const PUSH_OUT_STEPS: usize = 8;
 
 /// A segment with a radius: an edge of a rod.
@@ -168,11 +220,14 @@ pub(crate) struct Obstacles {
     pub own_skip: usize,
 }
 
-/// One penetration: its depth (> 0) and the direction that reduces it.
+/// One penetration: its depth (> 0) and the gradient of the distance it is measured by (the
+/// direction that reduces the depth; unit length for a capsule, about so for the field). The
+/// penalty's gradient and Hessian use this gradient as it is, so that they are those of the energy
+/// the line search measures.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Push {
     pub depth: f64,
-    pub normal: DVec3,
+    pub gradient: DVec3,
 }
 
 impl Obstacles {
@@ -185,11 +240,10 @@ impl Obstacles {
     pub fn each_push(&self, p: DVec3, radius: f64, edge: usize, mut visit: impl FnMut(Push)) {
         if let Some(field) = &self.field
             && let Some((d, grad)) = field.sample(p)
+            && d < radius
+            && grad.length_squared() > 1e-24
         {
-            let len = grad.length();
-            if d < radius && len > 1e-12 {
-                visit(Push { depth: radius - d, normal: grad / len });
-            }
+            visit(Push { depth: radius - d, gradient: grad });
         }
         let own = self.own.iter().enumerate().filter(|(j, _)| j.abs_diff(edge) > self.own_skip).map(|(_, c)| c);
         for capsule in self.others.iter().chain(own) {
@@ -197,7 +251,7 @@ impl Obstacles {
             let dist = away.length();
             let reach = radius + capsule.radius;
             if dist < reach && dist > 1e-12 {
-                visit(Push { depth: reach - dist, normal: away / dist });
+                visit(Push { depth: reach - dist, gradient: away / dist });
             }
         }
     }

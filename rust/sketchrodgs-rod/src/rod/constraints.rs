@@ -222,7 +222,7 @@ impl ElasticRod {
         }
         if let Some((i, p)) = self.grab {
             // contact first: a target inside the scene holds the vertex on its surface
-            t.x[i] = Some(self.reachable(p));
+            t.x[i] = Some(self.reachable(i, p));
         }
         t
     }

@@ -5,6 +5,9 @@
 use super::*;
 use crate::contact::{Obstacles, Push};
 
+/// Times the grab's way slides along the scene's surface after meeting it.
+const SLIDES: usize = 4;
+
 /// A Newton step may take a contact point this many radii into an obstacle it approaches (the
 /// penalty then pushes it back), no further.
 const STEP_SLACK: f64 = 0.5;
@@ -63,11 +66,11 @@ impl ElasticRod {
         self.each_contact_point(x, |p, edge, weights| {
             self.obstacles.each_push(p, r, edge, |push| pushes.push((weights, push)));
         });
-        for (weights, Push { depth, normal }) in pushes {
-            // E = k/2 depth², d(depth)/dp = -normal
+        for (weights, Push { depth, gradient }) in pushes {
+            // E = k/2 depth², d(depth)/dp = -gradient
             for &(i, w) in weights.iter().filter(|(_, w)| *w != 0.0) {
                 for c in 0..3 {
-                    self.grad[dof_x(i) + c] -= w * k * depth * normal[c];
+                    self.grad[dof_x(i) + c] -= w * k * depth * gradient[c];
                 }
             }
             if !with_hessian {
@@ -82,7 +85,7 @@ impl ElasticRod {
                         for rb in 0..3 {
                             let (row, col) = (dof_x(a) + ra, dof_x(b) + rb);
                             if row >= col {
-                                self.hess.add_lower(row, col, wa * wb * k * normal[ra] * normal[rb]);
+                                self.hess.add_lower(row, col, wa * wb * k * gradient[ra] * gradient[rb]);
                             }
                         }
                     }
@@ -111,7 +114,7 @@ impl ElasticRod {
             // obstacles within reach of this step: pushes against the grown radius
             self.obstacles.each_push(p, r + speed, edge, |push| {
                 let depth = push.depth - speed; // below 0: a gap, within reach
-                let approaching = -dp.dot(push.normal);
+                let approaching = -dp.dot(push.gradient);
                 let room = STEP_SLACK * r - depth;
                 if approaching > 0.0 && room > 0.0 {
                     limit = limit.min(room / approaching);
@@ -121,13 +124,22 @@ impl ElasticRod {
         limit
     }
 
-    /// Where the grab's target may put its vertex: out of the scene's solid parts by the radius
-    /// (another rod in the way is pushed aside instead, by `World::separate_rods`).
-    pub(super) fn reachable(&self, target: DVec3) -> DVec3 {
-        match &self.obstacles.field {
-            Some(field) => field.push_out(target, self.params.radius),
-            None => target,
+    /// Where the grab's target may put vertex `i`: the way from where it is to the target, up to
+    /// where it meets the scene, then along the surface (the part of the way into the surface
+    /// taken out), a few times. A vertex dragged into a table slides on it, on the side it came
+    /// from (another rod in the way is pushed aside instead, by `World::separate_rods`).
+    pub(super) fn reachable(&self, i: usize, target: DVec3) -> DVec3 {
+        let Some(field) = &self.obstacles.field else { return target };
+        let r = self.params.radius;
+        let mut from = field.push_out(self.state.x[i], r);
+        let mut goal = target;
+        for _ in 0..SLIDES {
+            let Some((contact, normal)) = field.first_contact(from, goal, r) else { return goal };
+            let rest = goal - contact;
+            goal = contact + rest - normal * rest.dot(normal).min(0.0);
+            from = contact;
         }
+        from
     }
 
     /// Whether vertex `i` is held (pinned, clamped or grabbed): contact cannot move it.
