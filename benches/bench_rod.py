@@ -455,10 +455,13 @@ def resolution_table() -> None:
 
 
 def main() -> None:
+    import bench_contact  # contact and gravity (issue 20), its own module
+
     cantilever_table()
     resolution_table()
     extreme_table()
     pull_tables()
+    bench_contact.main()
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from conftest import DATA
-from sketchrodgs import Camera, SketchRodGSError, data, extract_rod, load_scene, save_scene
+from sketchrodgs import Camera, GaussianScene, SketchRodGSError, data, extract_rod, load_scene, save_scene
 from sketchrodgs.cli import main
 
 CAMERA = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=320, height=180, fov_y_deg=40)
@@ -251,3 +251,72 @@ def test_the_scene_identity_survives_conversion_and_old_rods_still_load(ring_rod
     old = extraction.to_json()
     del old["scene"]  # a rod file written before the scene was recorded: not checked
     Animation(load_scene(DATA / "torus_10k.splat"), [Extraction.from_json(old)])
+
+
+# ----- the scene around the rod: contact and gravity (docs/contact.md) ------------------------------
+
+
+@pytest.fixture(scope="module")
+def ring_before_a_wall(tmp_path_factory):
+    """The ring with a wall of Gaussians 4 R behind its top arc (seen from CAMERA), and the rod of
+    that arc."""
+    ring = load_scene(data.sample("ring"))
+    step = 0.008
+    x, y, z = np.meshgrid(np.arange(-0.3, 0.3, step), np.arange(-0.1, 0.3, step), [0.2 + step, 0.2 + 2 * step])
+    wall = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    n = len(wall)
+
+    def rows(a, b):
+        return np.concatenate([a, b]).astype(np.float32)
+
+    scene = GaussianScene.from_colors(
+        rows(ring.means, wall),
+        rows(ring.scales, np.full((n, 3), step)),
+        rows(ring.quats, np.tile([1.0, 0, 0, 0], (n, 1))),
+        rows(ring.opacities, np.full(n, 0.95)),
+        rows(ring.colors, np.full((n, 3), 0.3)),
+    )
+    folder = tmp_path_factory.mktemp("wall")
+    save_scene(scene, folder / "scene.ply")
+    theta = np.radians(np.linspace(20, 160, 25))
+    uv, _ = CAMERA.project(np.stack([0.455 * np.cos(theta), 0.136 * np.sin(theta), 0 * theta], axis=1))
+    extraction = extract_rod(scene, CAMERA, uv)
+    assert extraction.gaussian_ids.max() < len(ring)  # the rod carries none of the wall
+    extraction.save(folder / "rod.json")
+    return folder, extraction
+
+
+@pytest.mark.parametrize("contact", [True, False])
+def test_a_rod_pulled_into_a_wall_stops_at_it_unless_contact_is_off(ring_before_a_wall, tmp_path, capsys, contact):
+    folder, extraction = ring_before_a_wall
+    out = tmp_path / "pull"
+    switch = [] if contact else ["--no-contact"]
+    assert main([
+        "animate", str(folder / "scene.ply"), str(folder / "rod.json"), "--grab", "0.5", "--to", "0,0,0.4",
+        "--duration", "0.5", "--hold", "0.2", "--fps", "10", "--video", "none", "--ply", "-o", str(out), *switch,
+    ]) == 0  # fmt: skip
+    assert ("contact on" if contact else "no contact") in capsys.readouterr().out
+    held = load_scene(out / "ply" / "frame_0007.ply").means
+    carried = np.percentile(held[extraction.gaussian_ids, 2], 99)  # how far back the rod's Gaussians went
+    if contact:
+        assert carried < 0.2 + 0.1 * extraction.radius  # the wall's front face (its Gaussians reach 1 sigma)
+    else:
+        assert carried > 0.35  # through the wall
+
+
+def test_gravity_with_the_up_axis_keeps_the_shape_and_refuses_a_rod_that_cannot_hang(ring_rod, tmp_path, capsys):
+    path, extraction = ring_rod
+    quiet = ["--duration", "0", "--hold", "1", "--fps", "10", "--video", "none", "--ply"]
+    assert main(["animate", "sample:ring", str(path), "--grab", "0.5", "--to", "0,0,0", *quiet, "--up", "+y",
+                 "-o", str(tmp_path / "g")]) == 0  # fmt: skip
+    assert "gravity 9.81 down, +y up (given)" in capsys.readouterr().out
+    rest = load_scene(data.sample("ring")).means[extraction.gaussian_ids]
+    held = load_scene(tmp_path / "g" / "ply" / "frame_0010.ply").means[extraction.gaussian_ids]
+    assert np.abs(held - rest).max() < 0.02 * extraction.radius  # no sag after 1 s
+    # held only by a pin at one end, the arc cannot carry its weight: one line naming the file
+    args = ["animate", "sample:ring", str(path), "--grab", "0.5", "--to", "0,0,0", *quiet, "--clamp", "none"]
+    assert main([*args, "--pin", "0", "--up", "+y", "-o", str(tmp_path / "h")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(path) in err and "cannot carry its weight" in err
+    assert "--gravity 0" in err and not (tmp_path / "h").exists()
+    assert main([*args, "--pin", "0", "--up", "+y", "--gravity", "0", "-o", str(tmp_path / "h")]) == 0

@@ -75,7 +75,7 @@ def test_camera_frames_the_folder_upright_by_its_training_cameras(output, tmp_pa
     assert uv[1, 1] < uv[0, 1]  # +y is up in the image
 
 
-def test_extract_and_animate_a_folder_without_camera_options(output, tmp_path):
+def test_extract_and_animate_a_folder_without_camera_options(output, tmp_path, capsys):
     theta = np.radians(np.linspace(20, 160, 25))
     uv, _ = VIEWS[0].project(np.stack([0.455 * np.cos(theta), 0.136 * np.sin(theta), 0 * theta], axis=1))
     (tmp_path / "stroke.json").write_text(json.dumps({"points": uv.tolist()}))
@@ -83,8 +83,11 @@ def test_extract_and_animate_a_folder_without_camera_options(output, tmp_path):
     assert main(["extract", str(output), "--stroke", str(tmp_path / "stroke.json"), "-o", str(rod)]) == 0
     assert load_rod(rod)[0].camera.name == "00000"  # the folder's first camera
     args = ["animate", str(output), str(rod), "--grab", "0.5", "--to", "0,0.05,0", "--duration", "0.1", "--hold", "0"]
+    capsys.readouterr()
     assert main([*args, "--fps", "10", "--video", "none", "-o", str(tmp_path / "anim")]) == 0
     assert len(list((tmp_path / "anim" / "frames").glob("*.png"))) == 1
+    # the training cameras know which way is up: gravity is on, against it
+    assert "gravity 9.81 down, +y up (from 4 training cameras)" in capsys.readouterr().out
 
 
 def test_a_folder_that_is_no_training_output_is_one_line(tmp_path, capsys):

@@ -95,8 +95,8 @@ def test_a_stem_pulled_into_the_main_stem_stops_at_it():
     polyline = rod.polyline.astype(np.float64)
     anim = Animation(scene, [rod])
     middle = len(polyline) // 2
+    assert anim.field is not None
     # towards the main stem, far past it
-    toward = anim.field.values  # noqa: F841 (the field is there)
     target = np.array([0.0, polyline[middle, 1], 0.0])
     offset = 1.5 * (target - polyline[middle])
     for _ in anim.frames(Pull(middle, tuple(offset), duration=0.5, hold=0.2, release=False), fps=30):

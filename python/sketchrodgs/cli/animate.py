@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ._args import non_negative, numbers, pixels, positive, scene_help, scene_path, vertex_or_fraction
+from ._framing import UP_CHOICES
+
+if TYPE_CHECKING:
+    from ..framing import Up
+    from ..scene import GaussianScene
 
 NAME = "animate"
 HELP = "pull a rod vertex, hold, release; write rendered frames, a video and optionally deformed .ply files"
@@ -109,6 +115,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="RATE",
         help=f"damping rate in 1/s (default {defaults.damping:g})",
     )
+    scene = parser.add_argument_group("the scene around the rods (docs/contact.md)")
+    scene.add_argument(
+        "--no-contact",
+        action="store_true",
+        help="let the rods pass through the scene and each other (default: they stay out of its solid parts)",
+    )
+    scene.add_argument(
+        "--friction",
+        type=non_negative,
+        default=0.0,
+        metavar="MU",
+        help="Coulomb friction of the rods on the scene (default 0: they slide freely)",
+    )
+    scene.add_argument(
+        "--up",
+        choices=UP_CHOICES,
+        help="the scene's up axis, for gravity (default: the scene folder's training cameras'; without "
+        "them, no gravity)",
+    )
+    scene.add_argument(
+        "--gravity",
+        type=non_negative,
+        default=9.81,
+        metavar="G",
+        help="gravity in scene units per s^2 when the up axis is known (default 9.81; 0: none). Each rod's "
+        "rest shape is made to hold its captured shape under it",
+    )
     parser.add_argument(
         "--no-subdivide",
         action="store_true",
@@ -127,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     from ..animate import Animation, Pull, vertex_at_fraction
     from ..atomic import atomic_write_text
     from ..camera import load_cameras, select_camera
-    from ..errors import SketchRodGSError
+    from ..errors import SimulationError, SketchRodGSError
     from ..extract import load_rod
     from ..frames import FrameRenderer
     from ..images import FRAME_PNG_LEVEL, save_png, to_uint8
@@ -154,14 +187,29 @@ def run(args: argparse.Namespace) -> int:
             return vertex_at_fraction(grabbed, value) if isinstance(value, float) else value
 
         params = RodParams(youngs_modulus=args.youngs_modulus, density=args.density, damping=args.damping)
-        animation = Animation(
-            scene,
-            extractions,
-            params,
-            clamp=args.clamp,
-            pins=[[vertex(v) for v in args.pin]],
-            subdivide=not args.no_subdivide,
-        )
+        up = _gravity_up(args, scene)
+        try:
+            animation = Animation(
+                scene,
+                extractions,
+                params,
+                clamp=args.clamp,
+                pins=[[vertex(v) for v in args.pin]],
+                subdivide=not args.no_subdivide,
+                contact=not args.no_contact,
+                friction=args.friction,
+                up=None if up is None else up.vector,
+                gravity=args.gravity,
+            )
+        except SimulationError as err:
+            if up is None:
+                raise
+            # "rod K: no rest shape holds ..." from Animation: name the file, say what to change
+            rod, _, why = str(err).partition(": ")
+            path = args.rods[int(rod.split()[-1])] if rod.startswith("rod ") else "the rods"
+            raise SimulationError(
+                f"{path}: {why} [{up.axis if up else ''} up: --clamp, --pin, or --gravity 0]"
+            ) from None
         grab = vertex(args.grab)
         if not -len(grabbed) <= grab < len(grabbed):
             raise SketchRodGSError(f"grab vertex: {grab} is outside the rod's {len(grabbed)} vertices")
@@ -203,7 +251,24 @@ def run(args: argparse.Namespace) -> int:
         outputs.commit()
     rest = np.abs(animation.rods[0].positions - animation.rods[0].rest_positions).max()
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in totals.items())
+    world = "no gravity" if up is None else f"gravity {args.gravity:g} down, {up.axis} up ({up.reason})"
+    touch = "no contact" if args.no_contact else "contact on"
     print(
-        f"{count} frames at {camera.width}x{camera.height} -> {args.output}; rod 0 ends {rest:.3g} from rest; {stages}"
+        f"{count} frames at {camera.width}x{camera.height} -> {args.output}; {touch}, {world}; "
+        f"rod 0 ends {rest:.3g} from rest; {stages}"
     )
     return 0
+
+
+def _gravity_up(args: argparse.Namespace, scene: GaussianScene) -> Up | None:
+    """The up direction gravity acts against: --up, else the training cameras' of a 3DGS output
+    folder; None without either (a guess from the scene's shape is not enough to pull rods by)."""
+    from ..camera import load_cameras
+    from ..framing import scene_up
+    from ..io import training_cameras
+
+    if args.gravity == 0:
+        return None
+    found = training_cameras(args.scene)
+    up = scene_up(scene, load_cameras(found) if found else [], args.up)
+    return None if up.source == "guess" else up

@@ -72,22 +72,54 @@ impl DistanceField {
         if !(inside(g.x, nx) && inside(g.y, ny) && inside(g.z, nz)) {
             return None;
         }
+        Some(self.spline(g))
+    }
+
+    /// [`Self::sample`] where the distance at `p` may be under `within`; None where it is surely
+    /// not (or `p` is outside the grid). One node read decides for most points: the spline mixes
+    /// nodes at most 2 cells from the nearest one, and node values, distances, differ by at most
+    /// their distance apart.
+    pub fn sample_within(&self, p: DVec3, within: f64) -> Option<(f64, DVec3)> {
+        let g = (p - self.origin) / self.spacing;
+        let [nx, ny, nz] = self.dims;
+        let inside = |v: f64, n: usize| v >= 0.0 && v <= (n - 1) as f64;
+        if !(inside(g.x, nx) && inside(g.y, ny) && inside(g.z, nz)) {
+            return None;
+        }
+        let node = |v: f64| v.round() as usize;
+        let nearest = f64::from(self.values[node(g.x) + nx * (node(g.y) + ny * node(g.z))]);
+        if nearest - SPLINE_REACH * self.spacing >= within {
+            return None;
+        }
+        Some(self.spline(g))
+    }
+
+    /// The spline's value and gradient at grid coordinates `g` (inside the grid).
+    fn spline(&self, g: DVec3) -> (f64, DVec3) {
+        let [nx, ny, nz] = self.dims;
         let (wx, ix) = spline_weights(g.x, nx);
         let (wy, iy) = spline_weights(g.y, ny);
         let (wz, iz) = spline_weights(g.z, nz);
+        // separably: along x (value and slope) for each of the 4x4 rows, then y, then z
         let (mut value, mut grad) = (0.0, DVec3::ZERO);
         for (c, &k) in iz.iter().enumerate() {
+            let (mut v0, mut vx, mut vy) = (0.0, 0.0, 0.0);
             for (b, &j) in iy.iter().enumerate() {
-                let row = nx * (j + ny * k);
+                let row = &self.values[nx * (j + ny * k)..];
+                let (mut s0, mut s1) = (0.0, 0.0);
                 for (a, &i) in ix.iter().enumerate() {
-                    let v = f64::from(self.values[row + i]);
-                    let (fx, fy, fz) = (wx[0][a], wy[0][b], wz[0][c]);
-                    value += v * fx * fy * fz;
-                    grad += v * DVec3::new(wx[1][a] * fy * fz, fx * wy[1][b] * fz, fx * fy * wz[1][c]);
+                    let v = f64::from(row[i]);
+                    s0 += v * wx[0][a];
+                    s1 += v * wx[1][a];
                 }
+                v0 += s0 * wy[0][b];
+                vx += s1 * wy[0][b];
+                vy += s0 * wy[1][b];
             }
+            value += v0 * wz[0][c];
+            grad += DVec3::new(vx * wz[0][c], vy * wz[0][c], v0 * wz[1][c]);
         }
-        Some((value, grad / self.spacing))
+        (value, grad / self.spacing)
     }
 
     /// `p` moved out along the field's gradient until it is at least `radius` from the surface
@@ -154,6 +186,10 @@ fn spline_weights(g: f64, n: usize) -> ([[f64; 4]; 2], [usize; 4]) {
     ([values, slopes], [node(-1), node(0), node(1), node(2)])
 }
 
+/// How far (in cells) the nodes a spline value mixes lie from the nearest node: up to 2 cells along
+/// each axis, so at most 2√3 < 3.5.
+const SPLINE_REACH: f64 = 3.5;
+
 /// Bisection steps that place a contact along a way (to 2^-20 of a step).
 const BISECTIONS: usize = 20;
 
@@ -208,14 +244,106 @@ pub(crate) fn closest_parameters(p0: DVec3, p1: DVec3, q0: DVec3, q1: DVec3) -> 
     (s, t)
 }
 
+/// Capsules with a bounding-box hierarchy over their order (a rod's consecutive edges lie close
+/// together, so halving the sequence halves space well): finding what lies near a point visits
+/// O(log n) boxes instead of every capsule, which makes rod–rod contact affordable at n = 1000.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct CapsuleTree {
+    capsules: Vec<Capsule>,
+    /// Node `k`: the box around capsules `start..end`, and its children (none for a leaf).
+    nodes: Vec<TreeNode>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct TreeNode {
+    low: DVec3,
+    high: DVec3,
+    start: usize,
+    end: usize,
+    children: Option<(usize, usize)>,
+}
+
+/// Capsules per leaf of a [`CapsuleTree`].
+const LEAF: usize = 8;
+
+impl CapsuleTree {
+    pub fn new(capsules: Vec<Capsule>) -> Self {
+        let mut tree = Self { capsules, nodes: Vec::new() };
+        if !tree.capsules.is_empty() {
+            tree.build(0, tree.capsules.len());
+        }
+        tree
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.capsules.is_empty()
+    }
+
+    /// Adds the node over `start..end` and its subtree; returns its index.
+    fn build(&mut self, start: usize, end: usize) -> usize {
+        let (mut low, mut high) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for c in &self.capsules[start..end] {
+            low = low.min(c.a.min(c.b) - DVec3::splat(c.radius));
+            high = high.max(c.a.max(c.b) + DVec3::splat(c.radius));
+        }
+        let index = self.nodes.len();
+        self.nodes.push(TreeNode { low, high, start, end, children: None });
+        if end - start > LEAF {
+            let mid = start + (end - start) / 2;
+            let left = self.build(start, mid);
+            let right = self.build(mid, end);
+            self.nodes[index].children = Some((left, right));
+        }
+        index
+    }
+
+    /// Visits `(index, capsule)` for every capsule whose box comes within `reach` of the box
+    /// `low..high` (a superset of the capsules within `reach` of anything in it), except those
+    /// with an index in `skip` (a contact point's own neighbours along its rod).
+    pub fn each_near(
+        &self,
+        low: DVec3,
+        high: DVec3,
+        reach: f64,
+        skip: std::ops::Range<usize>,
+        mut visit: impl FnMut(usize, &Capsule),
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        // depth-first with a fixed stack: the tree is balanced, at most log2(n) levels deep
+        let mut stack = [0usize; 2 * usize::BITS as usize];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = &self.nodes[stack[top]];
+            if skip.start <= node.start && node.end <= skip.end {
+                continue;
+            }
+            let gap = (node.low - high).max(low - node.high).max(DVec3::ZERO);
+            if gap.length_squared() > reach * reach {
+                continue;
+            }
+            match node.children {
+                Some((left, right)) => {
+                    stack[top] = left;
+                    stack[top + 1] = right;
+                    top += 2;
+                }
+                None => (node.start..node.end).filter(|j| !skip.contains(j)).for_each(|j| visit(j, &self.capsules[j])),
+            }
+        }
+    }
+}
+
 /// What one rod touches during a step.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Obstacles {
     pub field: Option<Arc<DistanceField>>,
     /// Other rods' edges.
-    pub others: Vec<Capsule>,
+    pub others: CapsuleTree,
     /// The rod's own edges (edge `j` at index `j`), where self-contact is on.
-    pub own: Vec<Capsule>,
+    pub own: CapsuleTree,
     /// Own edges within this many edges of a contact point's edge are its neighbours, not obstacles.
     pub own_skip: usize,
 }
@@ -239,20 +367,22 @@ impl Obstacles {
     /// (for self-contact), handed to `visit`.
     pub fn each_push(&self, p: DVec3, radius: f64, edge: usize, mut visit: impl FnMut(Push)) {
         if let Some(field) = &self.field
-            && let Some((d, grad)) = field.sample(p)
+            && let Some((d, grad)) = field.sample_within(p, radius)
             && d < radius
             && grad.length_squared() > 1e-24
         {
             visit(Push { depth: radius - d, gradient: grad });
         }
-        let own = self.own.iter().enumerate().filter(|(j, _)| j.abs_diff(edge) > self.own_skip).map(|(_, c)| c);
-        for capsule in self.others.iter().chain(own) {
+        let mut touch = |capsule: &Capsule| {
             let away = p - capsule.nearest(p);
             let dist = away.length();
             let reach = radius + capsule.radius;
             if dist < reach && dist > 1e-12 {
                 visit(Push { depth: reach - dist, gradient: away / dist });
             }
-        }
+        };
+        self.others.each_near(p, p, radius, 0..0, |_, c| touch(c));
+        let neighbours = edge.saturating_sub(self.own_skip)..edge + self.own_skip + 1;
+        self.own.each_near(p, p, radius, neighbours, |_, c| touch(c));
     }
 }

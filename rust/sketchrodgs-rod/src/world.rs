@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use crate::contact::{Obstacles, closest_parameters};
+use crate::contact::{CapsuleTree, Obstacles, closest_parameters};
 use crate::{DistanceField, ElasticRod, RodError, SolverSettings, StepReport};
 
 /// Rounds of [`World::separate_rods`] over all edge pairs.
@@ -142,46 +142,50 @@ impl World {
     fn separate_pair(&mut self, i: usize, j: usize, h: f64) -> bool {
         let (ra, rb) = (self.rods[i].params().radius, self.rods[j].params().radius);
         let skip = if i == j { self.rods[i].own_skip() } else { 0 };
-        let (na, nb) = (self.rods[i].num_vertices() - 1, self.rods[j].num_vertices() - 1);
+        let near = CapsuleTree::new(self.rods[j].capsules());
+        let mut pairs = Vec::new();
+        // pairs whose boxes come within a diameter more than touching: nudges in this round move
+        // edges by up to an overlap, the rest are caught in the next round
+        for (e, edge) in self.rods[i].capsules().iter().enumerate() {
+            let earlier = if i == j { 0..e + skip + 1 } else { 0..0 }; // each pair once, no neighbours
+            near.each_near(edge.a.min(edge.b), edge.a.max(edge.b), 3.0 * ra, earlier, |f, _| pairs.push((e, f)));
+        }
         let mut moved = false;
-        for e in 0..na {
-            let first = if i == j { e + skip + 1 } else { 0 };
-            for f in first..nb {
-                let (p0, p1) = (self.rods[i].positions()[e], self.rods[i].positions()[e + 1]);
-                let (q0, q1) = (self.rods[j].positions()[f], self.rods[j].positions()[f + 1]);
-                let (s, t) = closest_parameters(p0, p1, q0, q1);
-                let away = p0.lerp(p1, s) - q0.lerp(q1, t);
-                let dist = away.length();
-                let overlap = ra + rb - dist;
-                if overlap <= 0.0 || dist <= 1e-12 {
-                    continue;
-                }
-                let normal = away / dist;
-                // the movable vertices of each side and how much of the move each takes
-                let side = |rod: &ElasticRod, k: usize, u: f64| {
-                    [(k, 1.0 - u), (k + 1, u)].map(|(v, w)| if rod.is_held(v) { (v, 0.0) } else { (v, w) })
-                };
-                let (wa, wb) = (side(&self.rods[i], e, s), side(&self.rods[j], f, t));
-                let (ma, mb) = (wa[0].1 + wa[1].1, wb[0].1 + wb[1].1);
-                if ma + mb <= 0.0 {
-                    continue;
-                }
-                // each side's share of the separation, over its movable weight
-                let (share_a, share_b) = (ma / (ma + mb), mb / (ma + mb));
-                for (v, w) in wa {
-                    if w > 0.0 {
-                        let weight = w / (wa[0].1 * wa[0].1 + wa[1].1 * wa[1].1);
-                        self.rods[i].nudge(v, normal * (overlap * share_a * weight), h);
-                    }
-                }
-                for (v, w) in wb {
-                    if w > 0.0 {
-                        let weight = w / (wb[0].1 * wb[0].1 + wb[1].1 * wb[1].1);
-                        self.rods[j].nudge(v, -normal * (overlap * share_b * weight), h);
-                    }
-                }
-                moved = true;
+        for (e, f) in pairs {
+            let (p0, p1) = (self.rods[i].positions()[e], self.rods[i].positions()[e + 1]);
+            let (q0, q1) = (self.rods[j].positions()[f], self.rods[j].positions()[f + 1]);
+            let (s, t) = closest_parameters(p0, p1, q0, q1);
+            let away = p0.lerp(p1, s) - q0.lerp(q1, t);
+            let dist = away.length();
+            let overlap = ra + rb - dist;
+            if overlap <= 0.0 || dist <= 1e-12 {
+                continue;
             }
+            let normal = away / dist;
+            // the movable vertices of each side and how much of the move each takes
+            let side = |rod: &ElasticRod, k: usize, u: f64| {
+                [(k, 1.0 - u), (k + 1, u)].map(|(v, w)| if rod.is_held(v) { (v, 0.0) } else { (v, w) })
+            };
+            let (wa, wb) = (side(&self.rods[i], e, s), side(&self.rods[j], f, t));
+            let (ma, mb) = (wa[0].1 + wa[1].1, wb[0].1 + wb[1].1);
+            if ma + mb <= 0.0 {
+                continue;
+            }
+            // each side's share of the separation, over its movable weight
+            let (share_a, share_b) = (ma / (ma + mb), mb / (ma + mb));
+            for (v, w) in wa {
+                if w > 0.0 {
+                    let weight = w / (wa[0].1 * wa[0].1 + wa[1].1 * wa[1].1);
+                    self.rods[i].nudge(v, normal * (overlap * share_a * weight), h);
+                }
+            }
+            for (v, w) in wb {
+                if w > 0.0 {
+                    let weight = w / (wb[0].1 * wb[0].1 + wb[1].1 * wb[1].1);
+                    self.rods[j].nudge(v, -normal * (overlap * share_b * weight), h);
+                }
+            }
+            moved = true;
         }
         moved
     }
@@ -191,14 +195,16 @@ impl World {
         let mut obstacles =
             Obstacles { field: self.field.clone().filter(|_| self.contact.scene), ..Obstacles::default() };
         if self.contact.rods {
+            let mut others = Vec::new();
             for (j, other) in self.rods.iter().enumerate() {
                 if j == i {
-                    obstacles.own = other.capsules();
+                    obstacles.own = CapsuleTree::new(other.capsules());
                     obstacles.own_skip = other.own_skip();
                 } else {
-                    obstacles.others.extend(other.capsules());
+                    others.extend(other.capsules());
                 }
             }
+            obstacles.others = CapsuleTree::new(others);
         }
         obstacles
     }
