@@ -322,23 +322,23 @@ def test_random_polylines_rest_in_place_and_survive_a_pull(steps, pull):
 # ----- several rods, API contract -----
 
 
-def test_rods_in_one_world_step_together_as_if_alone():
+def test_rods_in_one_world_that_do_not_touch_step_together_as_if_alone():
     alone = Rod(helix(30))
     alone.clamp(0)
     alone.grab(-1, (0.0, 0.0, 1.0))
     world = World()
     a = world.add(helix(30))
-    b = world.add(straight(20, 0.5), radius=0.02, youngs_modulus=1e6)
+    b = world.add(straight(20, 0.5) - (0.0, 0.0, 2.0), radius=0.02, youngs_modulus=1e6)  # 2 m below
     a.clamp(0)
     a.grab(-1, (0.0, 0.0, 1.0))
     b.pin(0)
-    b.grab(-1, (0.0, 0.5, 0.0))
+    b.grab(-1, (0.0, 0.5, -2.0))
     for _ in range(20):
         reports = world.step(DT)
         assert len(reports) == 2 and all(r.converged for r in reports)
         alone.step(DT)
     np.testing.assert_array_equal(a.positions, alone.positions)
-    np.testing.assert_allclose(b.positions[-1], (0.0, 0.5, 0.0), atol=1e-12)
+    np.testing.assert_allclose(b.positions[-1], (0.0, 0.5, -2.0), atol=1e-12)
     assert [r.index for r in world.rods] == [0, 1]
     world.remove(a)
     assert b.index == 0 and len(world) == 1

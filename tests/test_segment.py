@@ -145,3 +145,80 @@ def test_the_rod_file_keeps_which_gaussians_are_attached(tmp_path):
     data["binding"]["attached"] = [1]
     with pytest.raises(Exception, match="binding.attached"):
         Extraction.from_json(data, "bad.json")
+
+
+# The Rust segmentation decides as the NumPy implementation it replaced, to the bit.
+
+
+def _same_binding(a, b) -> None:
+    for field in ("gaussian_ids", "segment", "t", "offset", "distance", "attached"):
+        x, y = getattr(a, field), getattr(b, field)
+        assert x.dtype == y.dtype and x.shape == y.shape, field
+        assert x.tobytes() == y.tobytes(), field
+
+
+def _clutter_rope() -> tuple[np.ndarray, GaussianScene]:
+    """A thin rope winding in depth, a pole across it and clutter around (the bench's, smaller)."""
+    tubes = synthetic.tube_scene([synthetic.loop, synthetic.pole], radius=R, clutter=800, seed=3)
+    return tubes.axes[0][::4], tubes.scene
+
+
+@pytest.mark.parametrize(
+    "case, options",
+    [
+        ("fin and rail", {}),
+        ("leaf and body", {}),
+        ("leaf and body", {"attach": False}),
+        ("leaf and body", {"attach_size": 4 * R}),
+        ("leaf near the end", {}),
+        ("clutter rope", {}),
+        ("clutter rope", {"grow": 1.5}),
+    ],
+)
+def test_segmentation_matches_the_numpy_reference(case, options):
+    from reference.segment_reference import segment_and_bind as reference
+
+    if case == "fin and rail":
+        fin = grid((-0.3, 0.05 + R, -0.001), (0.3, 0.05 + 2.2 * R, 0.001), 0.002)
+        rail = grid((-0.3, 0.05 - 2.0 * R, -0.001), (0.3, 0.05 - 1.9 * R, 0.001), 0.002)
+        (scene, _), axis = with_extras(fin=fin, rail=rail), AXIS
+    elif case == "leaf and body":
+        body = grid((-0.45, 0.05 - 12 * R, -0.001), (0.45, 0.05 - 0.9 * R, 0.001), 0.003)
+        (scene, _), axis = with_extras(leaf=leaf_on_a_petiole(0.1), body=body), AXIS
+    elif case == "leaf near the end":
+        (scene, _), axis = with_extras(leaf=leaf_on_a_petiole(0.44)), AXIS
+    else:
+        axis, scene = _clutter_rope()
+    binding = segment_and_bind(axis, scene, R, **options)
+    assert len(binding.gaussian_ids) > 100
+    _same_binding(binding, reference(axis, scene.means, R, **options))
+
+
+def test_segmentation_does_not_depend_on_the_thread_count():
+    from conftest import outputs_per_thread_count
+
+    code = (
+        "import hashlib, numpy as np; from sketchrodgs import synthetic; "
+        "from sketchrodgs.segment import segment_and_bind; "
+        "t = synthetic.tube_scene([synthetic.loop, synthetic.pole], radius=0.01, clutter=800, seed=3); "
+        "b = segment_and_bind(t.axes[0][::4], t.scene, 0.01); "
+        "print(hashlib.sha256(b''.join(np.ascontiguousarray(getattr(b, f)).tobytes() for f in "
+        "('gaussian_ids', 'segment', 't', 'offset', 'distance', 'attached'))).hexdigest())"
+    )
+    assert len(outputs_per_thread_count(code, (1, 2, 3))) == 1
+
+
+def test_bad_input_is_a_clear_error():
+    scene, _ = with_extras()
+    for polyline, radius, match in (
+        (AXIS[:1], R, "at least 2 vertices"),
+        (np.where(np.arange(91)[:, None] == 5, np.nan, AXIS), R, "vertex 5 is not finite"),
+        (AXIS, 0.0, "radius must be finite and > 0"),
+        (AXIS, float("nan"), "radius must be finite"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            segment_and_bind(polyline, scene, radius)
+    with pytest.raises(ValueError, match="grow must be finite"):
+        segment_and_bind(AXIS, scene, R, grow=-1.0)
+    with pytest.raises(ValueError, match="attach_size must be finite"):
+        segment_and_bind(AXIS, scene, R, attach_size=float("inf"))

@@ -75,6 +75,15 @@ def cross_section_centroids(
     half_width: float,
     reach: float,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint32]]: ...
+def max_alpha(
+    means: npt.NDArray[np.float32],
+    scales: npt.NDArray[np.float32],
+    quats: npt.NDArray[np.float32],
+    opacities: npt.NDArray[np.float32],
+    origin: tuple[float, float, float] | list[float],
+    spacing: float,
+    dims: tuple[int, int, int] | list[int],
+) -> npt.NDArray[np.float32]: ...
 def rasterize(
     means: npt.NDArray[np.float32],
     scales: npt.NDArray[np.float32],
@@ -152,6 +161,13 @@ class RodWorld:
 
     def __init__(self) -> None: ...
     def __len__(self) -> int: ...
+    def hold_under_gravity(self, rod: int) -> tuple[int, float]: ...
+    def set_field(
+        self, values: npt.NDArray[np.float32] | None, origin: tuple[float, float, float], spacing: float
+    ) -> None: ...
+    def has_field(self) -> bool: ...
+    def contact(self) -> tuple[bool, bool, float]: ...
+    def set_contact(self, scene: bool, rods: bool, friction: float) -> None: ...
     def add_rod(
         self,
         polyline: npt.NDArray[np.float64],
@@ -209,15 +225,26 @@ class RodWorld:
 
 def default_rod_params() -> dict[str, Any]: ...
 def default_solver_settings() -> dict[str, Any]: ...
-def linked_components(
-    points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], link: float
-) -> npt.NDArray[np.int64]: ...
-def linked_to(
-    points: npt.NDArray[np.float32], group: npt.NDArray[np.uint8], source: int, target: int, link: float
-) -> npt.NDArray[np.int64]: ...
-def grow_part(
-    points: npt.NDArray[np.float32], kind: npt.NDArray[np.uint8], spacings: float, link_min: float, link_max: float
-) -> tuple[float, npt.NDArray[np.bool_], bool]: ...
+def segment_and_bind(
+    polyline: npt.NDArray[np.float64],
+    arc: npt.NDArray[np.float64],
+    length: float,
+    means: npt.NDArray[np.float32],
+    radius: float,
+    grow: float,
+    link_spacings: float,
+    link_min: float,
+    link_max: float,
+    attach_size: float | None,
+    end_margin: float,
+) -> tuple[
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int32],
+    npt.NDArray[np.float32],
+    npt.NDArray[np.float32],
+    npt.NDArray[np.float32],
+    npt.NDArray[np.bool_],
+]: ...
 def skin_scatter(
     rest: npt.NDArray[np.float32],
     deformed: npt.NDArray[np.float32],

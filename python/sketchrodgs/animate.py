@@ -4,6 +4,10 @@ The app's interaction as a script: the ends of each rod clamped (both by default
 authors' app; or one, or none) and any vertices pinned, one vertex grabbed and its target moved by
 an offset over `duration` seconds, held for `hold` seconds, then released and left to spring back
 for `settle` seconds.
+
+The rods meet the scene (docs/contact.md): they do not enter its solid parts (a distance field of
+the Gaussians they do not carry) nor each other; and with an up direction, gravity pulls them
+while their rest shapes hold the captured shapes (a captured hanging cable stays until pulled).
 """
 
 from __future__ import annotations
@@ -16,11 +20,12 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from .errors import SketchRodGSError
+from .contact import SceneField, scene_field
+from .errors import SimulationError, SketchRodGSError
 from .extract import Extraction
 from .polyline import arc_lengths, polyline_length
 from .rig import DEFAULT_END_RAMP, Rig
-from .rod import Rod, RodParams, World
+from .rod import ContactSettings, Rod, RodParams, World
 from .scene import GaussianScene
 from .scene_identity import check_rod_scene
 from .skin import skin_into
@@ -30,6 +35,27 @@ logger = logging.getLogger("sketchrodgs")
 Clamp = Literal["both", "start", "end", "none"]
 CLAMPS: tuple[str, ...] = get_args(Clamp)
 _CLAMPED_ENDS = {"both": (0, -1), "start": (0,), "end": (-1,), "none": ()}
+
+
+_AXES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0), "+z": (0, 0, 1), "-z": (0, 0, -1)}
+
+
+def _gravity(up: str | Sequence[float] | np.ndarray | None, magnitude: float) -> tuple[float, float, float] | None:
+    """The gravity vector for a scene whose up direction is `up` (None: no gravity)."""
+    if up is None:
+        return None
+    if not (np.isfinite(magnitude) and magnitude >= 0):
+        raise SketchRodGSError(f"gravity: must be finite and >= 0, got {magnitude}")
+    if isinstance(up, str):
+        if up not in _AXES:
+            raise SketchRodGSError(f"up: expected one of {', '.join(_AXES)} or a vector, got {up!r}")
+        vector = np.array(_AXES[up], np.float64)
+    else:
+        vector = np.asarray(up, np.float64).ravel()
+        if vector.shape != (3,) or not np.isfinite(vector).all() or not np.linalg.norm(vector) > 0:
+            raise SketchRodGSError(f"up: expected a non-zero 3-vector, got {up!r}")
+    g = -magnitude * vector / np.linalg.norm(vector)
+    return (float(g[0]), float(g[1]), float(g[2]))
 
 
 def vertex_at_fraction(polyline: np.ndarray, fraction: float) -> int:
@@ -118,6 +144,11 @@ class Animation:
         subdivide: split needle Gaussians along the rods first (`Rig`); the animated scene then
             has more rows than `scene`, and `rig.source` maps them back.
         end_ramp: the motion eases in over this many R from a clamped end (`Rig.build`).
+        contact: the rods do not enter the scene's solid parts, nor each other (docs/contact.md).
+        friction: Coulomb friction coefficient of the rods against the scene.
+        up: the scene's up direction (a unit vector, or "+x" ... "-z"): gravity (`gravity` m/s^2)
+            pulls the rods the other way, and each rod's rest shape is made to hold its captured
+            shape under it. None (default): no gravity.
 
     Attributes:
         rest_scene: the scene the frames deform (the rig's: `scene` with needles split).
@@ -133,6 +164,10 @@ class Animation:
         pins: Sequence[Sequence[int]] = (),
         subdivide: bool = True,
         end_ramp: float = DEFAULT_END_RAMP,
+        contact: bool = True,
+        friction: float = 0.0,
+        up: str | Sequence[float] | np.ndarray | None = None,
+        gravity: float = 9.81,
     ) -> None:
         if not extractions:
             raise SketchRodGSError("no rods to animate")
@@ -141,8 +176,12 @@ class Animation:
         if len(pins) > len(extractions):
             raise SketchRodGSError(f"pins: {len(pins)} lists for {len(extractions)} rods")
         per_rod = [params] * len(extractions) if isinstance(params, RodParams) else list(params)
+        if not (np.isfinite(friction) and friction >= 0):
+            raise SketchRodGSError(f"friction: must be finite and >= 0, got {friction}")
+        weight = _gravity(up, gravity)
         self.scene = scene
         self.world = World()
+        self.world.contact = ContactSettings(scene=contact, rods=contact, friction=float(friction))
         self.rods: list[Rod] = []
         for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
             check_rod_scene(extraction.scene_identity, scene, f"rod {k}", "the scene animated")
@@ -151,13 +190,28 @@ class Animation:
                     f"rod {k}: binds Gaussian {int(extraction.gaussian_ids.max())} but the scene has {len(scene)}"
                 )
             material = RodParams(**{**p.to_dict(), "radius": extraction.radius})
+            if weight is not None:
+                material = RodParams(**{**material.to_dict(), "gravity": weight})
             rod = Rod(extraction.polyline, params=material, world=self.world)
             for end in _CLAMPED_ENDS[clamp]:
                 rod.clamp(end)
             for vertex in pins[k] if k < len(pins) else ():
                 rod.pin(vertex)
+            if weight is not None:
+                try:
+                    rod.hold_under_gravity()
+                except SimulationError as err:
+                    raise SimulationError(f"rod {k}: {err}") from None
             self.rods.append(rod)
         self.rig = Rig.build(scene, extractions, self.rods, subdivide=subdivide, end_ramp=end_ramp)
+        # the scene's solid parts the rods do not enter: what they do not carry
+        self.field: SceneField | None = None
+        if contact:
+            carried = np.concatenate([b.gaussian_ids for b in self.rig.bound] + [np.empty(0, np.int64)])
+            polylines, radii = [e.polyline for e in extractions], [e.radius for e in extractions]
+            self.field = scene_field(self.rig.scene, polylines, radii, carried)
+            if self.field is not None:
+                self.world.set_scene_field(self.field.values, self.field.origin, self.field.spacing)
         self.rest_scene = self.rig.scene
         self.means = self.rest_scene.means.copy()
         self.quats = self.rest_scene.quats.copy()

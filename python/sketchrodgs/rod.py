@@ -35,6 +35,8 @@ _DEFAULT_MATERIAL: dict[str, Any] = _core.default_rod_params()
 _DEFAULT_SOLVER: dict[str, Any] = _core.default_solver_settings()
 
 __all__ = [
+    "ContactSettings",
+    "HoldReport",
     "Rod",
     "RodEnergy",
     "RodParams",
@@ -250,9 +252,35 @@ class _OneThreadAtATime:
         return call
 
 
+@dataclass(frozen=True)
+class ContactSettings:
+    """What contact a `World` simulates (docs/contact.md).
+
+    Attributes:
+        scene: rods do not enter the scene's distance field (`World.set_scene_field`), where one
+            is set; a grabbed vertex dragged into it slides on its surface.
+        rods: rods do not pass through each other, nor through themselves.
+        friction: Coulomb friction coefficient against the scene (0: none).
+    """
+
+    scene: bool = True
+    rods: bool = True
+    friction: float = 0.0
+
+
+@dataclass(frozen=True)
+class HoldReport:
+    """What `Rod.hold_under_gravity` did: its fixed-point iterations and how far the equilibrium
+    under gravity is from the shape held [m]."""
+
+    iterations: int
+    deviation: float
+
+
 class World:
-    """Rods stepped together (no rod-rod contact). A World and its rods belong to one thread at a
-    time: a call while another thread steps it raises `SimulationError`.
+    """Rods stepped together: they do not pass through each other, nor into the scene's distance
+    field where one is set (`contact`). A World and its rods belong to one thread at a time: a
+    call while another thread steps it raises `SimulationError`.
 
     Args:
         solver: solver settings shared by the rods.
@@ -273,6 +301,36 @@ class World:
         self._core.set_solver(
             float(s.tolerance), int(s.max_iterations), int(s.max_halvings), int(s.max_static_iterations)
         )
+
+    @property
+    def contact(self) -> ContactSettings:
+        scene, rods, friction = self._core.contact()
+        return ContactSettings(bool(scene), bool(rods), float(friction))
+
+    @contact.setter
+    def contact(self, c: ContactSettings) -> None:
+        self._core.set_contact(bool(c.scene), bool(c.rods), float(c.friction))
+
+    def set_scene_field(
+        self, values: np.ndarray | None, origin: npt.ArrayLike = (0, 0, 0), spacing: float = 1.0
+    ) -> None:
+        """The static scene the rods do not enter, as a signed distance field [m] (negative inside):
+        `values` (nz, ny, nx) at the nodes `origin + spacing * (i, j, k)` (`contact.scene_field`
+        builds one from a scene); None removes it."""
+        if values is None:
+            self._core.set_field(None, (0.0, 0.0, 0.0), 1.0)
+            return
+        array = np.ascontiguousarray(values, np.float32)
+        if array.ndim != 3:
+            raise SimulationError(f"distance field: expected (nz, ny, nx) values, got shape {array.shape}")
+        o = np.asarray(origin, np.float64).ravel()
+        if o.shape != (3,):
+            raise SimulationError(f"distance field origin: expected 3 numbers, got {origin!r}")
+        self._core.set_field(array, (float(o[0]), float(o[1]), float(o[2])), float(spacing))
+
+    @property
+    def has_scene_field(self) -> bool:
+        return bool(self._core.has_field())
 
     @property
     def rods(self) -> list[Rod]:
@@ -470,6 +528,18 @@ class Rod:
         if not conv:
             logger.warning("rod %d: static solve did not converge in %d iterations", self.index, it)
         return StaticReport(int(it), bool(conv), float(e))
+
+    def hold_under_gravity(self) -> HoldReport:
+        """Changes the rest shape so that the rod stays in its current shape under its gravity
+        with its current pins and clamps (an inverse static solve, docs/contact.md): a captured
+        hanging cable then does not sag before it is pulled. No change without gravity.
+
+        Raises:
+            SimulationError: no rest shape holds the shape (its pins and clamps cannot carry its
+                weight; clamp an end, or turn gravity off).
+        """
+        iterations, deviation = self.world._core.hold_under_gravity(self.index)
+        return HoldReport(int(iterations), float(deviation))
 
     # ----- state -----
 

@@ -2,9 +2,11 @@
 //!
 //! Binding Gaussians to a rod (docs/deformation.md: each binds to its nearest point on the rest polyline)
 //! and recentring the extracted polyline both ask, for tens of thousands of Gaussian centres,
-//! which segment of a polyline is nearest and where on it. A uniform grid of cell size `reach`
-//! over the segments makes each query look at a handful of segments; queries run in parallel and
-//! the answer does not depend on the thread count.
+//! which segment of a polyline is nearest and where on it. A uniform grid over the segments
+//! (cells about the reach wide) makes each query look at a handful of segments, nearest to its
+//! cell's centre first; queries run in parallel and the answer does not depend on the thread
+//! count. `proximity` links centres to their neighbours, and `segment` decides with both which
+//! Gaussians follow a rod.
 //!
 //! ```
 //! use sketchrodgs_polyline::{nearest_on_polyline, Nearest};
@@ -19,6 +21,7 @@
 use rayon::prelude::*;
 
 pub mod proximity;
+pub mod segment;
 
 /// What makes a query impossible.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -35,17 +38,14 @@ pub enum PolylineError {
 /// cheap first cut of every query around a rod on a scene of millions of Gaussians.
 pub fn rows_in_box(points: &[[f32; 3]], low: [f32; 3], high: [f32; 3]) -> Vec<u32> {
     const ROWS_PER_TASK: usize = 1 << 16;
-    points
-        .par_chunks(ROWS_PER_TASK)
-        .enumerate()
-        .flat_map_iter(|(chunk, rows)| {
-            let start = chunk * ROWS_PER_TASK;
-            rows.iter().enumerate().filter_map(move |(k, p)| {
-                let inside = (0..3).all(|a| p[a] >= low[a] && p[a] <= high[a]);
-                inside.then_some((start + k) as u32)
-            })
-        })
-        .collect()
+    let rows_in = |start: usize, chunk: &[[f32; 3]]| -> Vec<u32> {
+        let inside = |p: &[f32; 3]| (0..3).all(|a| p[a] >= low[a] && p[a] <= high[a]);
+        (start..).zip(chunk).filter(|(_, p)| inside(p)).map(|(row, _)| row as u32).collect()
+    };
+    if points.len() <= ROWS_PER_TASK {
+        return rows_in(0, points); // (a scene around a rod: one task, no parallel plumbing)
+    }
+    points.par_chunks(ROWS_PER_TASK).enumerate().flat_map_iter(|(k, chunk)| rows_in(k * ROWS_PER_TASK, chunk)).collect()
 }
 
 /// The nearest point of the polyline to a query point.
@@ -59,68 +59,224 @@ pub struct Nearest {
     pub distance: f32,
 }
 
-/// Cells of the grid are `reach` wide, so a point's nearest segment within `reach` is registered in
-/// the point's own cell (each segment is entered in every cell its grown bounding box touches).
-/// The grid is dense over the polyline's grown bounding box; points outside it have no candidates.
+/// A polyline segment, with what every query of it needs.
+struct Segment {
+    a: [f64; 3],
+    /// From `a` to the other end, and its squared length.
+    ab: [f64; 3],
+    length2: f64,
+    /// Its bounding box.
+    low: [f64; 3],
+    high: [f64; 3],
+}
+
+impl Segment {
+    fn new(a: [f64; 3], b: [f64; 3]) -> Self {
+        let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        Self {
+            a,
+            ab,
+            length2: ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2],
+            low: std::array::from_fn(|k| a[k].min(b[k])),
+            high: std::array::from_fn(|k| a[k].max(b[k])),
+        }
+    }
+
+    /// The parameter of the nearest point to `p` and the squared distance to it.
+    fn nearest(&self, p: [f64; 3]) -> (f64, f64) {
+        let (a, ab) = (self.a, self.ab);
+        let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+        let t = if self.length2 > 0.0 {
+            ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / self.length2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d2: f64 = (0..3).map(|k| (ap[k] - t * ab[k]).powi(2)).sum();
+        (t, d2)
+    }
+
+    /// The squared distance from `p` to the bounding box: at most the squared distance to the
+    /// segment, and a fraction of the cost.
+    fn box_distance2(&self, p: [f64; 3]) -> f64 {
+        let outside = |k: usize| {
+            // at most one of the two is positive
+            let (below, above) = (self.low[k] - p[k], p[k] - self.high[k]);
+            (if below > 0.0 { below } else { 0.0 }) + (if above > 0.0 { above } else { 0.0 })
+        };
+        let (x, y, z) = (outside(0), outside(1), outside(2));
+        x * x + y * y + z * z
+    }
+}
+
+/// The segments near each cell of a uniform grid: a point's nearest segment within `reach` is
+/// registered in the point's own cell (each segment is entered in every cell its grown bounding
+/// box touches). The grid is dense over the polyline's grown bounding box; points outside it
+/// have no candidates.
 struct SegmentGrid {
-    reach: f64,
+    cell: f64,
     origin: [f64; 3],
     dims: [usize; 3],
-    cells: Vec<Vec<u32>>,
+    /// `dims + 1`, for `cell_of`.
+    past: [f64; 3],
+    /// Each cell's segments, in index order (`starts` has one more entry: the end).
+    starts: Vec<u32>,
+    registered: Vec<u32>,
 }
 
 impl SegmentGrid {
-    fn new(polyline: &[[f64; 3]], reach: f64) -> Self {
+    fn new(segments: &[Segment], reach: f64) -> Self {
         let low: [f64; 3] =
-            std::array::from_fn(|k| polyline.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min) - reach);
+            std::array::from_fn(|k| segments.iter().map(|s| s.low[k]).fold(f64::INFINITY, f64::min) - reach);
         let high: [f64; 3] =
-            std::array::from_fn(|k| polyline.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
-        // Keep the grid to a few million cells however small the reach is against the polyline.
-        let mut cell = reach;
+            std::array::from_fn(|k| segments.iter().map(|s| s.high[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
+        // Cells as wide as the reach, but not much wider than the segments: in cells many
+        // segments wide the lists grow long and the stop test of `nearest` loose (a point lies
+        // far from its cell's centre); narrower ones cost more to fill than they save. And the
+        // grid kept to a few million cells however small the reach is against the polyline.
+        let longest = segments.iter().map(|s| s.length2.sqrt()).fold(0.0, f64::max);
+        let mut cell = reach.min((8.0 * longest).max(reach / 1.5));
         while (0..3).map(|k| ((high[k] - low[k]) / cell).floor() + 1.0).product::<f64>() > 4.0e6 {
             cell *= 2.0;
         }
         let dims: [usize; 3] = std::array::from_fn(|k| ((high[k] - low[k]) / cell).floor() as usize + 1);
-        let mut grid = Self { reach: cell, origin: low, dims, cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]] };
-        for (i, w) in polyline.windows(2).enumerate() {
-            let lo = grid.cell_of(std::array::from_fn(|k| w[0][k].min(w[1][k]) - reach));
-            let hi = grid.cell_of(std::array::from_fn(|k| w[0][k].max(w[1][k]) + reach));
-            if let (Some(lo), Some(hi)) = (lo, hi) {
-                for x in lo[0]..=hi[0] {
-                    for y in lo[1]..=hi[1] {
-                        for z in lo[2]..=hi[2] {
-                            grid.cells[(x * dims[1] + y) * dims[2] + z].push(i as u32);
-                        }
+        let past = dims.map(|d| d as f64 + 1.0);
+        let mut grid = Self { cell, origin: low, dims, past, starts: Vec::new(), registered: Vec::new() };
+        let boxes: Vec<Option<([usize; 3], [usize; 3])>> = segments
+            .iter()
+            .map(|s| {
+                let lo = grid.cell_of(std::array::from_fn(|k| s.low[k] - reach))?;
+                let hi = grid.cell_of(std::array::from_fn(|k| s.high[k] + reach))?;
+                Some((lo, hi))
+            })
+            .collect();
+        let each_cell = |(lo, hi): ([usize; 3], [usize; 3]), visit: &mut dyn FnMut([usize; 3])| {
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        visit([x, y, z]);
                     }
                 }
             }
+        };
+        // counted, then filled in segment order
+        let cells = dims[0] * dims[1] * dims[2];
+        let mut starts = vec![0_u32; cells + 1];
+        for &b in boxes.iter().flatten() {
+            each_cell(b, &mut |cell| starts[grid.index(cell) + 1] += 1);
         }
+        for c in 0..cells {
+            starts[c + 1] += starts[c];
+        }
+        let mut filled: Vec<u32> = starts[..cells].to_vec();
+        let mut registered = vec![0; starts[cells] as usize];
+        for (i, b) in boxes.iter().enumerate() {
+            if let Some(b) = *b {
+                each_cell(b, &mut |cell| {
+                    let c = grid.index(cell);
+                    registered[filled[c] as usize] = i as u32;
+                    filled[c] += 1;
+                });
+            }
+        }
+        (grid.starts, grid.registered) = (starts, registered);
         grid
     }
 
     fn cell_of(&self, p: [f64; 3]) -> Option<[usize; 3]> {
         let mut cell = [0; 3];
         for k in 0..3 {
-            let c = ((p[k] - self.origin[k]) / self.reach).floor();
+            let c = (p[k] - self.origin[k]) / self.cell;
             // clamp by a hair: bounds computed from the same vertices may round just outside
-            if !(c >= -1.0 && c <= self.dims[k] as f64) {
+            // (c in [-1, dims + 1) is floor(c) in [-1, dims]; truncation is the floor from 0 up)
+            if !(c >= -1.0 && c < self.past[k]) {
                 return None;
             }
-            cell[k] = (c.max(0.0) as usize).min(self.dims[k] - 1);
+            cell[k] = if c < 1.0 { 0 } else { (c as u32 as usize).min(self.dims[k] - 1) };
         }
         Some(cell)
     }
 
-    fn candidates(&self, p: [f64; 3]) -> &[u32] {
-        match self.cell_of(p) {
-            Some(c) => &self.cells[(c[0] * self.dims[1] + c[1]) * self.dims[2] + c[2]],
-            None => &[],
-        }
+    fn index(&self, cell: [usize; 3]) -> usize {
+        (cell[0] * self.dims[1] + cell[1]) * self.dims[2] + cell[2]
     }
+
+    fn cell_at(&self, index: usize) -> [usize; 3] {
+        [index / (self.dims[1] * self.dims[2]), index / self.dims[2] % self.dims[1], index % self.dims[2]]
+    }
+
+    fn centre(&self, cell: [usize; 3]) -> [f64; 3] {
+        std::array::from_fn(|k| self.origin[k] + (cell[k] as f64 + 0.5) * self.cell)
+    }
+
+    /// A cell's candidates ranked for its points: each registered segment with its distance from
+    /// the cell's centre, nearest first, less those that no point of the cell can have within
+    /// `reach` (a point of a cell lies within `spread` of its centre; an edge cell also takes
+    /// the points up to a cell beyond the grid).
+    fn ranked(&self, segments: &[Segment], cell: [usize; 3], reach: f64, slack: f64) -> RankedCell {
+        let centre = self.centre(cell);
+        let spread = (0..3)
+            .map(|k| {
+                let edges = usize::from(cell[k] == 0) + usize::from(cell[k] + 1 == self.dims[k]);
+                (self.cell * (0.5 + edges as f64)).powi(2)
+            })
+            .sum::<f64>()
+            .sqrt();
+        let c = self.index(cell);
+        let mut ranked: Vec<(u32, f64)> = self.registered[self.starts[c] as usize..self.starts[c + 1] as usize]
+            .iter()
+            .map(|&i| (i, segments[i as usize].nearest(centre).1.sqrt()))
+            .filter(|&(_, from_centre)| from_centre - spread <= reach + slack)
+            .collect();
+        ranked.sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
+        RankedCell { centre, segments: ranked }
+    }
+}
+
+/// A cell's segments, each with its distance from the cell's centre, nearest first.
+struct RankedCell {
+    centre: [f64; 3],
+    segments: Vec<(u32, f64)>,
+}
+
+impl RankedCell {
+    /// The nearest point to `p` (in this cell) within `reach` (see `nearest_on_polyline`).
+    fn nearest(&self, segments: &[Segment], p: [f64; 3], reach: f64, slack: f64) -> Option<Nearest> {
+        let off_centre = (0..3).map(|k| (p[k] - self.centre[k]).powi(2)).sum::<f64>().sqrt();
+        // the best so far: squared distance, segment (u32::MAX: none yet), parameter
+        let (mut best_d2, mut best, mut best_t) = (f64::INFINITY, u32::MAX, 0.0);
+        let mut bound = reach + slack; // no segment farther than this can be the answer
+        for &(s, from_centre) in &self.segments {
+            if from_centre - off_centre > bound + slack {
+                break; // the rest lie farther from the centre still
+            }
+            let segment = &segments[s as usize];
+            if segment.box_distance2(p) > bound * bound {
+                continue;
+            }
+            let (t, d2) = segment.nearest(p);
+            if d2 <= reach * reach && (d2 < best_d2 || (d2 == best_d2 && s < best)) {
+                (best_d2, best, best_t) = (d2, s, t);
+                bound = d2.sqrt() + slack;
+            }
+        }
+        (best != u32::MAX).then(|| Nearest { segment: best, t: best_t as f32, distance: best_d2.sqrt() as f32 })
+    }
+}
+
+/// How far past a bound a segment must be to be skipped: the computed distances carry rounding
+/// errors of about 1e-16 of the lengths involved, the slack is 1e-9 of them.
+fn slack(segments: &[Segment], cell: f64, reach: f64) -> f64 {
+    let longest = segments.iter().map(|s| s.length2.sqrt()).fold(0.0, f64::max);
+    1e-9 * (cell + reach + longest)
 }
 
 /// For each point, the nearest point on `polyline` if it is within `reach`, else `None`.
 /// Among equally near segments the lower index wins.
+///
+/// A segment is a candidate for the points of the grid cells around it (`SegmentGrid`). A
+/// cell's candidates are ranked by their distance from its centre once, for all its points, and
+/// a point stops at the first that is provably farther than the best so far, or skips one whose
+/// bounding box is: the answers are those of trying every candidate.
 pub fn nearest_on_polyline(
     polyline: &[[f32; 3]],
     points: &[[f32; 3]],
@@ -136,29 +292,28 @@ pub fn nearest_on_polyline(
         return Err(PolylineError::BadReach(reach));
     }
     let vertices: Vec<[f64; 3]> = polyline.iter().map(|v| v.map(f64::from)).collect();
-    let grid = SegmentGrid::new(&vertices, reach);
-    let reach2 = reach * reach;
+    let segments: Vec<Segment> = vertices.windows(2).map(|w| Segment::new(w[0], w[1])).collect();
+    let grid = SegmentGrid::new(&segments, reach);
+    let slack = slack(&segments, grid.cell, reach);
+    // each point's cell, and the cells that hold points ranked once
+    let cell_of: Vec<u32> =
+        points.par_iter().map(|p| grid.cell_of(p.map(f64::from)).map_or(u32::MAX, |c| grid.index(c) as u32)).collect();
+    let mut rank_of = vec![u32::MAX; grid.starts.len() - 1];
+    let mut occupied = Vec::new();
+    for &c in cell_of.iter().filter(|&&c| c != u32::MAX) {
+        if rank_of[c as usize] == u32::MAX {
+            rank_of[c as usize] = occupied.len() as u32;
+            occupied.push(c as usize);
+        }
+    }
+    let ranked: Vec<RankedCell> =
+        occupied.par_iter().map(|&c| grid.ranked(&segments, grid.cell_at(c), reach, slack)).collect();
     Ok(points
         .par_iter()
-        .map(|p| {
-            let p = p.map(f64::from);
-            let mut best: Option<(f64, u32, f64)> = None;
-            for &i in grid.candidates(p) {
-                let (a, b) = (vertices[i as usize], vertices[i as usize + 1]);
-                let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-                let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
-                let length2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-                let t = if length2 > 0.0 {
-                    ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / length2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let d2: f64 = (0..3).map(|k| (ap[k] - t * ab[k]).powi(2)).sum();
-                if d2 <= reach2 && best.is_none_or(|(bd, bi, _)| d2 < bd || (d2 == bd && i < bi)) {
-                    best = Some((d2, i, t));
-                }
-            }
-            best.map(|(d2, i, t)| Nearest { segment: i, t: t as f32, distance: d2.sqrt() as f32 })
+        .zip(&cell_of)
+        .map(|(p, &c)| {
+            let cell = ranked.get(*rank_of.get(c as usize)? as usize)?;
+            cell.nearest(&segments, p.map(f64::from), reach, slack)
         })
         .collect())
 }
@@ -258,6 +413,54 @@ mod tests {
                     (None, None) => {}
                     (Some(n), Some((_, d))) => assert!((n.distance - d).abs() < 1e-5, "{p:?}: {n:?} vs {d}"),
                     other => unreachable!("found and brute force disagree at {p:?}: {other:?}"),
+                }
+            }
+        }
+    }
+
+    /// Every segment tried, as `Segment::nearest` computes each: (segment, t, squared distance);
+    /// among equals the lower index.
+    fn exhaustive(polyline: &[[f32; 3]], p: [f32; 3], reach: f64) -> Option<(u32, f64, f64)> {
+        let p = p.map(f64::from);
+        let mut best: Option<(u32, f64, f64)> = None;
+        for (i, w) in polyline.windows(2).enumerate() {
+            let (t, d2) = Segment::new(w[0].map(f64::from), w[1].map(f64::from)).nearest(p);
+            if d2 <= reach * reach && best.is_none_or(|(_, _, bd)| d2 < bd) {
+                best = Some((i as u32, t, d2));
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn the_answers_are_those_of_trying_every_segment() {
+        // a winding polyline of short segments (a reach of many segments makes the cells finer
+        // than the reach), a V whose bisector is as near to both arms (the lower index wins), a
+        // repeated vertex; points around, past the ends and outside the grid
+        let winding: Vec<[f32; 3]> = (0..300)
+            .map(|i| {
+                let s = i as f32 * 0.02;
+                [s.cos() * (1.0 + 0.1 * s), s.sin(), 0.2 * (3.0 * s).sin()]
+            })
+            .collect();
+        let vee = vec![[-1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
+        let mut state = 99_u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let mut points: Vec<[f32; 3]> = (0..4000).map(|_| [3.0 * next(), 3.0 * next(), 1.0 * next()]).collect();
+        points.extend((0..50).map(|i| [0.0, i as f32 * 0.05, 0.0])); // on the V's bisector
+        for polyline in [&winding, &vee] {
+            for reach in [0.01, 0.07, 0.3, 1.5] {
+                let found = nearest_on_polyline(polyline, &points, reach).unwrap();
+                for (p, f) in points.iter().zip(&found) {
+                    let expected = exhaustive(polyline, *p, reach).map(|(segment, t, d2)| Nearest {
+                        segment,
+                        t: t as f32,
+                        distance: d2.sqrt() as f32,
+                    });
+                    assert_eq!(*f, expected, "{p:?} within {reach}");
                 }
             }
         }

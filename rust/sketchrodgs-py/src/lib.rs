@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod errors;
+mod field;
 mod formats;
 mod path;
 mod polyline;
@@ -19,6 +20,7 @@ mod skin;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    field::register(m)?;
     formats::register(m)?;
     path::register(m)?;
     polyline::register(m)?;

@@ -1,9 +1,9 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
-//! `_core.linked_components(...)`, `_core.linked_to(...)`, `_core.grow_part(...)`, `_core.rows_in_box(...)`.
+//! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use sketchrodgs_polyline::proximity::{self, ProximityError};
+use sketchrodgs_polyline::segment::{self, SegmentParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
 use crate::errors::SketchRodGSError;
@@ -86,75 +86,66 @@ fn cross_section_centroids<'py>(
     Ok((centroids.into_pyarray(py), counts.into_pyarray(py)))
 }
 
-/// Run a proximity query on `points` (N, 3) float32 and a per-point uint8 array (`name`).
-fn on_points<'py, T: Send>(
-    py: Python<'py>,
-    what: &str,
-    points: &Bound<'py, PyArray2<f32>>,
-    per_point: &Bound<'py, PyArray1<u8>>,
-    name: &str,
-    query: impl FnOnce(&[[f32; 3]], &[u8]) -> Result<T, ProximityError> + Send,
-) -> PyResult<T> {
-    let (points, per_point) = (points.try_readonly()?, per_point.try_readonly()?);
-    check_shape("points", points.shape(), &[None, Some(3)])?;
-    check_shape(name, per_point.shape(), &[Some(points.shape()[0])])?;
-    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let per_point = contiguous(&per_point, name)?;
-    run_parallel(py, what, || query(points, per_point))?.map_err(|e| SketchRodGSError::new_err(e.to_string()))
-}
+/// (gaussian_ids (G,) int64, segment (G,) int32, t (G,) float32, offset (G, 3) float32,
+/// distance (G,) float32, attached (G,) bool).
+type BindingArrays<'py> = (
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i32>>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<bool>>,
+);
 
-/// Components of the links between `points` (N, 3) float32 at most `link` apart within the same
-/// `group` (N,) uint8 (255: no links). Returns (N,) int64 labels 0, 1, ... (-1 for group 255).
+/// The Gaussians of `means` (N, 3) float32 that follow the rod on `polyline` (M, 3) float64, bound
+/// (`sketchrodgs_polyline::segment`): `arc` (M,) float64 arc lengths at the vertices, `length` the
+/// rod's length, `radius` R; `grow`, `link_min`, `link_max` and `end_margin` in radii;
+/// `attach_size` None attaches nothing.
 #[pyfunction]
-fn linked_components<'py>(
+#[pyo3(signature = (polyline, arc, length, means, radius, grow, link_spacings, link_min, link_max, attach_size, end_margin))]
+#[allow(clippy::too_many_arguments)]
+fn segment_and_bind<'py>(
     py: Python<'py>,
-    points: &Bound<'py, PyArray2<f32>>,
-    group: &Bound<'py, PyArray1<u8>>,
-    link: f32,
-) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let labels =
-        on_points(py, "linked_components", points, group, "group", |p, g| proximity::linked_components(p, g, link))?;
-    Ok(labels.iter().map(|&l| if l == u32::MAX { -1 } else { i64::from(l) }).collect::<Vec<i64>>().into_pyarray(py))
-}
-
-/// For each of `points` in group `source`, the lowest-numbered point of group `target` within
-/// `link` (see `linked_components`). Returns (N,) int64, -1 where there is none.
-#[pyfunction]
-fn linked_to<'py>(
-    py: Python<'py>,
-    points: &Bound<'py, PyArray2<f32>>,
-    group: &Bound<'py, PyArray1<u8>>,
-    source: u8,
-    target: u8,
-    link: f32,
-) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let found =
-        on_points(py, "linked_to", points, group, "group", |p, g| proximity::linked_to(p, g, source, target, link))?;
-    Ok(found.iter().map(|n| n.map_or(-1, i64::from)).collect::<Vec<i64>>().into_pyarray(py))
-}
-
-/// Grow a part from its seeds: `points` (N, 3) float32, `kind` (N,) uint8 (0 seed, 1 eligible,
-/// 2 other). Returns (link, part (N,) bool, touched) (see `sketchrodgs_polyline::proximity::grow`).
-#[pyfunction]
-fn grow_part<'py>(
-    py: Python<'py>,
-    points: &Bound<'py, PyArray2<f32>>,
-    kind: &Bound<'py, PyArray1<u8>>,
-    spacings: f32,
-    link_min: f32,
-    link_max: f32,
-) -> PyResult<(f32, Bound<'py, PyArray1<bool>>, bool)> {
-    let grown =
-        on_points(py, "grow_part", points, kind, "kind", |p, k| proximity::grow(p, k, spacings, link_min, link_max))?;
-    Ok((grown.link, grown.part.into_pyarray(py), grown.touched))
+    polyline: &Bound<'py, PyArray2<f64>>,
+    arc: &Bound<'py, PyArray1<f64>>,
+    length: f64,
+    means: &Bound<'py, PyArray2<f32>>,
+    radius: f64,
+    grow: f64,
+    link_spacings: f32,
+    link_min: f64,
+    link_max: f64,
+    attach_size: Option<f64>,
+    end_margin: f64,
+) -> PyResult<BindingArrays<'py>> {
+    let (polyline, arc, means) = (polyline.try_readonly()?, arc.try_readonly()?, means.try_readonly()?);
+    check_shape("polyline", polyline.shape(), &[None, Some(3)])?;
+    check_shape("arc", arc.shape(), &[Some(polyline.shape()[0])])?;
+    check_shape("means", means.shape(), &[None, Some(3)])?;
+    let polyline: &[[f64; 3]] = as_rows(contiguous(&polyline, "polyline")?);
+    let arc = contiguous(&arc, "arc")?;
+    let means: &[[f32; 3]] = as_rows(contiguous(&means, "means")?);
+    let params = SegmentParams { radius, grow, link_spacings, link_min, link_max, attach_size, end_margin };
+    let binding =
+        run_parallel(py, "segment_and_bind", || segment::segment_and_bind(polyline, arc, length, means, &params))?
+            .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let count = binding.rows.len();
+    let offset = numpy::ndarray::Array2::from_shape_vec((count, 3), binding.offset.into_flattened())
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    Ok((
+        binding.rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py),
+        binding.segment.into_iter().map(|s| s as i32).collect::<Vec<i32>>().into_pyarray(py),
+        binding.t.into_pyarray(py),
+        offset.into_pyarray(py),
+        binding.distance.into_pyarray(py),
+        binding.attached.into_pyarray(py),
+    ))
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
-    m.add_function(wrap_pyfunction!(linked_components, m)?)?;
-    m.add_function(wrap_pyfunction!(linked_to, m)?)?;
-    m.add_function(wrap_pyfunction!(grow_part, m)?)?;
+    m.add_function(wrap_pyfunction!(segment_and_bind, m)?)?;
     m.add_function(wrap_pyfunction!(rows_in_box, m)?)?;
     Ok(())
 }

@@ -5,7 +5,10 @@ use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sketchrodgs_rod::{Boundary, DMat3, DQuat, DVec3, ElasticRod, RodError, RodParams, SolverSettings, World};
+use sketchrodgs_rod::{
+    Boundary, ContactSettings, DMat3, DQuat, DVec3, DistanceField, ElasticRod, RodError, RodParams, SolverSettings,
+    World,
+};
 
 use crate::arrays::{check_shape, contiguous, no_panic};
 use crate::errors::SimulationError;
@@ -218,6 +221,51 @@ impl RodWorld {
         let world = &mut self.world;
         let reports = py.detach(|| no_panic("rod step", || world.step_many(dt, count)))?.map_err(rod_err)?;
         Ok(reports.iter().map(|r| (r.substeps, r.newton_iterations, r.rejected, r.converged)).collect())
+    }
+
+    /// Makes rod `rod`'s rest shape hold its current shape under its gravity:
+    /// `(iterations, deviation)` (docs/contact.md); SimulationError where nothing can hold it.
+    fn hold_under_gravity(&mut self, py: Python<'_>, rod: usize) -> PyResult<(usize, f64)> {
+        let settings = self.world.settings;
+        let r = self.rod_mut(rod)?;
+        let out =
+            py.detach(|| no_panic("rod hold under gravity", || r.hold_under_gravity(&settings)))?.map_err(rod_err)?;
+        Ok((out.iterations, out.deviation))
+    }
+
+    /// The scene's signed distance field the rods do not enter: `values` (nz, ny, nx) float32 at
+    /// the nodes `origin + spacing * (i, j, k)`; None clears it.
+    #[pyo3(signature = (values, origin, spacing))]
+    fn set_field(&mut self, values: Option<&Bound<'_, PyArray3<f32>>>, origin: [f64; 3], spacing: f64) -> PyResult<()> {
+        let Some(values) = values else {
+            self.world.set_field(None);
+            return Ok(());
+        };
+        let ro = values.try_readonly()?;
+        let shape = ro.shape();
+        let field =
+            DistanceField::new(origin, spacing, [shape[2], shape[1], shape[0]], contiguous(&ro, "values")?.to_vec())
+                .map_err(rod_err)?;
+        self.world.set_field(Some(field));
+        Ok(())
+    }
+
+    fn has_field(&self) -> bool {
+        self.world.field().is_some()
+    }
+
+    /// Contact settings: (scene, rods, friction).
+    fn contact(&self) -> (bool, bool, f64) {
+        let c = self.world.contact;
+        (c.scene, c.rods, c.friction)
+    }
+
+    fn set_contact(&mut self, scene: bool, rods: bool, friction: f64) -> PyResult<()> {
+        if !(friction.is_finite() && friction >= 0.0) {
+            return Err(SimulationError::new_err(format!("friction: must be finite and >= 0, got {friction}")));
+        }
+        self.world.contact = ContactSettings { scene, rods, friction };
+        Ok(())
     }
 
     /// Quasi-static solve of rod `rod`: `(iterations, converged, energy)`.

@@ -53,6 +53,15 @@ pub enum RodError {
     /// The time step is not a positive finite number.
     #[error("time step {0} must be positive and finite")]
     InvalidTimeStep(f64),
+    /// No rest shape holds the rod's shape under gravity with its boundary conditions.
+    #[error(
+        "no rest shape holds this rod's shape under gravity: its equilibrium stays {:.2} radii away; its pins and clamps cannot carry its weight (clamp an end, or turn gravity off)",
+        deviation / radius
+    )]
+    CannotHold { deviation: f64, radius: f64 },
+    /// A distance field that cannot be used.
+    #[error("distance field: {0}")]
+    InvalidField(String),
     /// A state array of the wrong length.
     #[error("{what} has {got} entries, expected {expected}")]
     LengthMismatch { what: &'static str, got: usize, expected: usize },

@@ -56,6 +56,7 @@
 #![allow(clippy::needless_range_loop)]
 
 mod banded;
+mod contact;
 mod dual;
 mod energy;
 mod error;
@@ -67,9 +68,10 @@ mod test_rng;
 mod world;
 
 pub use banded::{BandedMatrix, NotPositiveDefinite};
+pub use contact::{CONTACT_STIFFNESS, Capsule, DistanceField};
 pub use error::RodError;
 pub use params::{RodParams, SolverSettings};
-pub use rod::{Boundary, ElasticRod, Energy, StaticReport, StepReport};
-pub use world::World;
+pub use rod::{Boundary, ElasticRod, Energy, HoldReport, StaticReport, StepReport};
+pub use world::{ContactSettings, World};
 
 pub use glam::{DMat3, DQuat, DVec3};

@@ -120,7 +120,9 @@ pub struct SolverSettings {
     /// Newton stops when the largest position update is below `tolerance * rod length` and the
     /// largest twist update below `tolerance` radians. Default 1e-7.
     pub tolerance: f64,
-    /// Newton iterations per (sub)step before the step is retried as two half steps. Default 25.
+    /// Newton iterations per (sub)step before the step is retried as two half steps. Default 50:
+    /// a rod sliding far along a curved obstacle in one step (a released stem springing back past
+    /// a leaf) needs many short line-searched iterations, which halving the step does not shorten.
     pub max_iterations: usize,
     /// How many times a failing step may be halved (`2^depth` substeps at most). Default 8.
     pub max_halvings: u32,
@@ -130,7 +132,7 @@ pub struct SolverSettings {
 
 impl Default for SolverSettings {
     fn default() -> Self {
-        Self { tolerance: 1.0e-7, max_iterations: 25, max_halvings: 8, max_static_iterations: 200 }
+        Self { tolerance: 1.0e-7, max_iterations: 50, max_halvings: 8, max_static_iterations: 200 }
     }
 }
 

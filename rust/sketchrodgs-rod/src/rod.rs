@@ -1,6 +1,7 @@
 //! One discrete elastic rod: rest shape, state, boundary conditions and the implicit solver.
 
 use crate::banded::BandedMatrix;
+use crate::contact::Obstacles;
 use crate::dual::NV;
 use crate::energy::{self, BendTwistInput};
 use crate::frames::{
@@ -12,7 +13,11 @@ use glam::{DMat3, DQuat, DVec3};
 
 mod assembly;
 mod constraints;
+mod contacts;
+mod hold;
 mod solve;
+
+pub use hold::HoldReport;
 
 /// Half-bandwidth of the Hessian: a bending stencil spans 11 consecutive unknowns.
 const BANDWIDTH: usize = 10;
@@ -214,6 +219,9 @@ pub struct ElasticRod {
     pins: Vec<Option<DVec3>>,
     clamps: Vec<Clamp>,
     grab: Option<(usize, DVec3)>,
+    /// What the rod touches during the current step (docs/contact.md), and the penalty stiffness.
+    obstacles: Obstacles,
+    contact_stiffness: f64,
     // Workspace, reused between iterations.
     geo: Geometry,
     trial: Geometry,
@@ -299,6 +307,9 @@ impl ElasticRod {
             half_twist: Vec::new(),
         };
         let ndof = 4 * n - 1;
+        // per unit of mean edge length, so that a contact outweighs the rod's own stretching
+        let contact_stiffness =
+            crate::contact::CONTACT_STIFFNESS * params.stretch_stiffness() * (n - 1) as f64 / length;
         let mut rod = Self {
             params,
             rest_x: x,
@@ -315,6 +326,8 @@ impl ElasticRod {
             pins: vec![None; n],
             clamps: Vec::new(),
             grab: None,
+            obstacles: Obstacles::default(),
+            contact_stiffness,
             geo: Geometry::default(),
             trial: Geometry::default(),
             hess: BandedMatrix::new(ndof, BANDWIDTH),

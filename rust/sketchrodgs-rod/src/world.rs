@@ -1,13 +1,40 @@
-//! Several rods stepped together.
+//! Several rods stepped together, touching the scene and each other (docs/contact.md).
 
-use crate::{ElasticRod, RodError, SolverSettings, StepReport};
+use std::sync::Arc;
 
-/// A set of independent rods (no rod-rod contact) advanced by one call.
+use crate::contact::{Obstacles, closest_parameters};
+use crate::{DistanceField, ElasticRod, RodError, SolverSettings, StepReport};
+
+/// Rounds of [`World::separate_rods`] over all edge pairs.
+const SEPARATION_ROUNDS: usize = 4;
+
+/// What contact a [`World`] simulates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactSettings {
+    /// Rods do not enter the scene's distance field ([`World::set_field`]), where one is set.
+    pub scene: bool,
+    /// Rods do not pass through each other, nor through themselves.
+    pub rods: bool,
+    /// Coulomb friction coefficient against the scene (0: none).
+    pub friction: f64,
+}
+
+impl Default for ContactSettings {
+    fn default() -> Self {
+        Self { scene: true, rods: true, friction: 0.0 }
+    }
+}
+
+/// A set of rods advanced by one call. Each step, every rod sees the scene's distance field and
+/// the other rods (and its own far edges) where they are at the start of its step.
 #[derive(Debug, Clone, Default)]
 pub struct World {
     rods: Vec<ElasticRod>,
     /// Solver settings used by [`World::step`] (pass them to [`ElasticRod::solve_static`]).
     pub settings: SolverSettings,
+    /// Which contacts [`World::step`] simulates.
+    pub contact: ContactSettings,
+    field: Option<Arc<DistanceField>>,
 }
 
 impl World {
@@ -58,10 +85,122 @@ impl World {
         &self.rods
     }
 
+    /// The scene's signed distance field the rods do not enter (None: no scene contact).
+    pub fn set_field(&mut self, field: Option<DistanceField>) {
+        self.field = field.map(Arc::new);
+    }
+
+    /// The scene's distance field, if set.
+    pub fn field(&self) -> Option<&DistanceField> {
+        self.field.as_deref()
+    }
+
     /// Advances every rod by `dt` seconds; one report per rod, in order.
     pub fn step(&mut self, dt: f64) -> Result<Vec<StepReport>, RodError> {
         let settings = self.settings;
-        self.rods.iter_mut().map(|r| r.step(dt, &settings)).collect()
+        let mut reports = Vec::with_capacity(self.rods.len());
+        for i in 0..self.rods.len() {
+            let obstacles = self.obstacles_of(i);
+            let rod = &mut self.rods[i];
+            rod.set_obstacles(obstacles);
+            reports.push(rod.step(dt, &settings)?);
+            rod.apply_friction(self.contact.friction, dt);
+        }
+        if self.contact.rods {
+            self.separate_rods(dt);
+        }
+        Ok(reports)
+    }
+
+    /// Pushes apart, after a step of `h`, the edges of rods (and the far edges of one rod) that
+    /// came closer than their radii: each rod steps against where the others were, so two moving
+    /// towards each other can overlap by a step's motion. The closest points of each overlapping
+    /// pair move apart along their separation, shared between the two edges' free vertices (a held
+    /// vertex does not move), a few rounds over all pairs.
+    fn separate_rods(&mut self, h: f64) {
+        let mut nudged = vec![false; self.rods.len()];
+        for _ in 0..SEPARATION_ROUNDS {
+            let mut moved = false;
+            for i in 0..self.rods.len() {
+                for j in i..self.rods.len() {
+                    if self.separate_pair(i, j, h) {
+                        (moved, nudged[i], nudged[j]) = (true, true, true);
+                    }
+                }
+            }
+            if !moved {
+                break;
+            }
+        }
+        for (rod, _) in self.rods.iter_mut().zip(&nudged).filter(|(_, n)| **n) {
+            rod.after_nudges();
+        }
+    }
+
+    /// One round over the edge pairs of rods `i` and `j` (`i == j`: the rod's far edges); whether
+    /// anything moved.
+    fn separate_pair(&mut self, i: usize, j: usize, h: f64) -> bool {
+        let (ra, rb) = (self.rods[i].params().radius, self.rods[j].params().radius);
+        let skip = if i == j { self.rods[i].own_skip() } else { 0 };
+        let (na, nb) = (self.rods[i].num_vertices() - 1, self.rods[j].num_vertices() - 1);
+        let mut moved = false;
+        for e in 0..na {
+            let first = if i == j { e + skip + 1 } else { 0 };
+            for f in first..nb {
+                let (p0, p1) = (self.rods[i].positions()[e], self.rods[i].positions()[e + 1]);
+                let (q0, q1) = (self.rods[j].positions()[f], self.rods[j].positions()[f + 1]);
+                let (s, t) = closest_parameters(p0, p1, q0, q1);
+                let away = p0.lerp(p1, s) - q0.lerp(q1, t);
+                let dist = away.length();
+                let overlap = ra + rb - dist;
+                if overlap <= 0.0 || dist <= 1e-12 {
+                    continue;
+                }
+                let normal = away / dist;
+                // the movable vertices of each side and how much of the move each takes
+                let side = |rod: &ElasticRod, k: usize, u: f64| {
+                    [(k, 1.0 - u), (k + 1, u)].map(|(v, w)| if rod.is_held(v) { (v, 0.0) } else { (v, w) })
+                };
+                let (wa, wb) = (side(&self.rods[i], e, s), side(&self.rods[j], f, t));
+                let (ma, mb) = (wa[0].1 + wa[1].1, wb[0].1 + wb[1].1);
+                if ma + mb <= 0.0 {
+                    continue;
+                }
+                // each side's share of the separation, over its movable weight
+                let (share_a, share_b) = (ma / (ma + mb), mb / (ma + mb));
+                for (v, w) in wa {
+                    if w > 0.0 {
+                        let weight = w / (wa[0].1 * wa[0].1 + wa[1].1 * wa[1].1);
+                        self.rods[i].nudge(v, normal * (overlap * share_a * weight), h);
+                    }
+                }
+                for (v, w) in wb {
+                    if w > 0.0 {
+                        let weight = w / (wb[0].1 * wb[0].1 + wb[1].1 * wb[1].1);
+                        self.rods[j].nudge(v, -normal * (overlap * share_b * weight), h);
+                    }
+                }
+                moved = true;
+            }
+        }
+        moved
+    }
+
+    /// What rod `i` touches in the coming step.
+    fn obstacles_of(&self, i: usize) -> Obstacles {
+        let mut obstacles =
+            Obstacles { field: self.field.clone().filter(|_| self.contact.scene), ..Obstacles::default() };
+        if self.contact.rods {
+            for (j, other) in self.rods.iter().enumerate() {
+                if j == i {
+                    obstacles.own = other.capsules();
+                    obstacles.own_skip = other.own_skip();
+                } else {
+                    obstacles.others.extend(other.capsules());
+                }
+            }
+        }
+        obstacles
     }
 
     /// Advances every rod by `dt`, `count` times; reports summed per rod.

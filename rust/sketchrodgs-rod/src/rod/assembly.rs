@@ -140,7 +140,7 @@ impl ElasticRod {
             return f64::INFINITY;
         }
         let (s, b, t) = self.elastic_parts(x, geo);
-        let mut phi = s + b + t;
+        let mut phi = s + b + t + self.contact_energy(x);
         let g = DVec3::from_array(self.params.gravity);
         for i in 0..x.len() {
             phi -= self.mass[i] * g.dot(x[i]);

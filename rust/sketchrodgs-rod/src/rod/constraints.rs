@@ -221,7 +221,8 @@ impl ElasticRod {
             t.frames.push(c.rotation * c.anchor_frame);
         }
         if let Some((i, p)) = self.grab {
-            t.x[i] = Some(p);
+            // contact first: a target inside the scene holds the vertex on its surface
+            t.x[i] = Some(self.reachable(i, p));
         }
         t
     }

@@ -301,7 +301,7 @@ impl ElasticRod {
         x_try: &mut [DVec3],
         th_try: &mut [f64],
     ) -> Option<(f64, f64)> {
-        let mut alpha = 1.0;
+        let mut alpha = self.step_limit(x, dir);
         for _ in 0..MAX_BACKTRACKS {
             x_try.copy_from_slice(x);
             th_try.copy_from_slice(th);
@@ -333,6 +333,7 @@ impl ElasticRod {
             self.hess.clear();
         }
         self.assemble_elastic(x, geo, hessian);
+        self.assemble_contact(x, with_hessian);
         let gvec = DVec3::from_array(self.params.gravity);
         for i in 0..n {
             for r in 0..3 {

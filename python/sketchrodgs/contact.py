@@ -1,0 +1,133 @@
+"""The static scene as rods feel it (docs/contact.md): a signed distance field of the scene's
+solid parts, built from its Gaussians around the rods' reach, for `World.set_scene_field`.
+
+1. A grid over the rods' rest box, grown by half the longest rod (a clamped rod's middle moves
+   about that far at most) and a few radii, at half the smallest radius per cell, coarser where
+   that would pass `MAX_CELLS`.
+2. Per cell, the largest opacity any unbound Gaussian reaches at its centre (`_core.max_alpha`,
+   in Rust); cells where it reaches `SOLID_ALPHA` are solid.
+3. The rods' own place at rest is carved out (cells within `CARVE_RADII` radii of a rest
+   polyline): what a rod touches at rest, where it joins the scene, does not push it.
+4. Hollow insides are filled: captures are shells of surface Gaussians, and a rod pushed into an
+   object must meet its inside as solid too. Non-solid cells that do not connect to the grid's
+   border are solid.
+5. The signed distance by Euclidean distance transforms (scipy), negative inside, in scene units.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from . import _core
+from .polyline import polyline_length
+from .scene import GaussianScene
+
+SOLID_ALPHA = 0.5
+MAX_CELLS = 2_000_000
+CARVE_RADII = 2.0
+REACH_SHARE = 0.5
+MARGIN_RADII = 4.0
+
+
+@dataclass(frozen=True)
+class SceneField:
+    """A signed distance field of a scene's solid parts.
+
+    Attributes:
+        values: (nz, ny, nx) float32 signed distance [scene units] at the nodes, negative inside.
+        origin: (3,) float64 the node (0, 0, 0).
+        spacing: distance between nodes.
+        solid: (nz, ny, nx) bool, the solid cells it was made from (for pictures and tests).
+    """
+
+    values: np.ndarray
+    origin: np.ndarray
+    spacing: float
+    solid: np.ndarray
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance at `points` (N, 3), +inf outside the grid: the cubic B-spline of the node
+        values, as the rod solver samples it (docs/contact.md)."""
+        g = (np.asarray(points, np.float64) - self.origin) / self.spacing
+        shape = np.array(self.values.shape[::-1])  # nx, ny, nz
+        inside = np.all((g >= 0) & (g <= shape - 1), axis=1)
+        out = np.full(len(g), np.inf)
+        if inside.any():
+            coords = g[inside][:, ::-1].T  # z, y, x order for map_coordinates
+            out[inside] = ndimage.map_coordinates(self.values, coords, order=3, mode="nearest", prefilter=False)
+        return out
+
+
+def scene_field(
+    scene: GaussianScene,
+    polylines: Sequence[np.ndarray],
+    radii: Sequence[float],
+    exclude: np.ndarray | None = None,
+) -> SceneField | None:
+    """The solid parts of `scene` around rods at rest on `polylines` (each (M, 3)) of `radii`,
+    leaving out the Gaussians of rows `exclude` (the rods' own). None where nothing there is solid.
+    """
+    rest = [np.asarray(p, np.float64) for p in polylines]
+    radius = float(min(radii))
+    reach = REACH_SHARE * max(polyline_length(p) for p in rest) + MARGIN_RADII * float(max(radii))
+    low = np.min([p.min(axis=0) for p in rest], axis=0) - reach
+    high = np.max([p.max(axis=0) for p in rest], axis=0) + reach
+    spacing = max(radius / 2, float(np.prod(high - low) / MAX_CELLS) ** (1 / 3))
+    dims = np.maximum(np.ceil((high - low) / spacing).astype(int) + 1, 2)
+    keep = np.ones(len(scene), bool)
+    if exclude is not None and len(exclude):
+        keep[np.asarray(exclude, np.int64)] = False
+    # Gaussians whose centre lies within the grid grown by a few of their own sizes
+    grow = 3.0 * float(np.max(scene.scales)) if len(scene) else 0.0
+    rows = _core.rows_in_box(
+        scene.means, tuple((low - grow).astype(np.float32)), tuple((high + grow).astype(np.float32))
+    )
+    rows = rows[keep[rows]]
+    if len(rows) == 0:
+        return None
+    alpha = _core.max_alpha(
+        np.ascontiguousarray(scene.means[rows]),
+        np.ascontiguousarray(scene.scales[rows]),
+        np.ascontiguousarray(scene.quats[rows]),
+        np.ascontiguousarray(scene.opacities[rows]),
+        [float(v) for v in low],
+        float(spacing),
+        [int(v) for v in dims],
+    ).reshape(dims[2], dims[1], dims[0])
+    solid = alpha >= SOLID_ALPHA
+    carved = _carved(rest, radii, low, spacing, dims)
+    solid &= ~carved
+    if not solid.any():
+        return None
+    # hollow insides: non-solid regions not connected to the grid's border
+    labels, _ = ndimage.label(~solid)
+    border = np.unique(
+        np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(), labels[:, :, [0, -1]].ravel()])
+    )
+    enclosed = ~solid & ~np.isin(labels, border[border > 0]) & ~carved
+    solid |= enclosed
+    outside = ndimage.distance_transform_edt(~solid) - 0.5
+    inside = ndimage.distance_transform_edt(solid) - 0.5
+    values = (np.where(solid, -inside, outside) * spacing).astype(np.float32)
+    return SceneField(values, low.astype(np.float64), float(spacing), solid)
+
+
+def _carved(
+    rest: list[np.ndarray], radii: Sequence[float], low: np.ndarray, spacing: float, dims: np.ndarray
+) -> np.ndarray:
+    """(nz, ny, nx) the cells within CARVE_RADII radii of a rest polyline."""
+    carved = np.zeros((dims[2], dims[1], dims[0]), bool)
+    for polyline, r in zip(rest, radii):
+        reach = CARVE_RADII * float(r) + spacing
+        lo = np.maximum(np.floor((polyline.min(axis=0) - reach - low) / spacing).astype(int), 0)
+        hi = np.minimum(np.ceil((polyline.max(axis=0) + reach - low) / spacing).astype(int) + 1, dims)
+        z, y, x = np.mgrid[lo[2] : hi[2], lo[1] : hi[1], lo[0] : hi[0]]
+        centres = (np.stack([x, y, z], axis=-1).reshape(-1, 3) * spacing + low).astype(np.float32)
+        _, _, distance = _core.nearest_on_polyline(polyline.astype(np.float32), centres, reach)
+        near = (distance <= CARVE_RADII * float(r)).reshape(z.shape)
+        carved[lo[2] : hi[2], lo[1] : hi[1], lo[0] : hi[0]] |= near
+    return carved
