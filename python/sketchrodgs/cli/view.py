@@ -104,6 +104,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-clamp", action="store_true", help="leave rod ends free instead of clamping them")
     parser.add_argument(
+        "--no-contact",
+        action="store_true",
+        help="let rods pass through the scene and each other (the panel's Contact switch starts off)",
+    )
+    parser.add_argument(
         "--swing-period",
         type=_seconds,
         default=0.5,
@@ -190,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
         fps=args.fps,
         splat_update=args.splat_update,
         allow_origins=args.allow_origin,
+        contact=not args.no_contact,
     )
     if not is_loopback(args.host):
         print(f"sketchrodgs view: warning: {_exposed(args.host, app.port)}", file=sys.stderr, flush=True)

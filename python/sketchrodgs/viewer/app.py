@@ -34,6 +34,7 @@ from ..images import save_png
 from ..io import save_scene
 from ..scene import GaussianScene
 from .camera import DEFAULT_WORKING_WIDTH, ViserView, framing_view, viser_view
+from .contact import SceneContact
 from .display import SPLAT_UPDATES, SceneDisplay
 from .feedback import Feedback, Kind, Notice, describe_failure
 from .history import History, Step
@@ -84,6 +85,8 @@ class ViewerApp:
         working_width: width in pixels of the render a stroke is traced on.
         allow_origins: origins of pages other than the viewer's own that may connect
             (`origin.py`), e.g. "http://myhost:8080".
+        contact: rods keep out of the scene's solid parts and of each other (`contact.py`).
+        friction: Coulomb friction of the rods against the scene.
     """
 
     def __init__(
@@ -102,6 +105,8 @@ class ViewerApp:
         splat_update: SketchUpdate = "auto",
         working_width: int = DEFAULT_WORKING_WIDTH,
         allow_origins: Sequence[str] = (),
+        contact: bool = True,
+        friction: float = 0.0,
     ) -> None:
         if up not in UP_DIRECTIONS:
             raise SketchRodGSError(f"up: expected one of {', '.join(UP_DIRECTIONS)}, got {up!r}")
@@ -145,6 +150,7 @@ class ViewerApp:
             self.history = History()
             # moving Gaussians by segment poses needs no per-frame skinning (exports skin on demand)
             self.rods = RodSet(scene, material, clamp, skin_each_frame=splat_update == "exact")
+            self.contact = SceneContact(self.rods)
             self.display = SceneDisplay(self.server, scene, splat_update, self._on_handle_drag, self._on_handle_click)
             with self.rods.lock:
                 self.display.sync(self.rods)  # the scene, sent once
@@ -154,6 +160,8 @@ class ViewerApp:
                 self.add_extraction(extraction, record=False)
             self._start_view = self._set_initial_camera(camera or (rods[0].camera if rods else None))
             self._wire_panel()
+            self.panel.friction.value = friction  # type: ignore[misc]  # viser's values are settable
+            self.set_contact(contact, friction)
             self.tabs = Tabs(self.server, self._make_tab)
             self.loop = SimulationLoop(self.rods, self.display, fps, on_frame=self._frame_done)
             self.loop.start()
@@ -179,6 +187,7 @@ class ViewerApp:
         """Stop the simulation, the extraction worker and the server."""
         self.loop.stop()
         self._worker.shutdown(wait=False, cancel_futures=True)
+        self.contact.close()
         self.server.stop()
 
     def __enter__(self) -> ViewerApp:
@@ -318,6 +327,7 @@ class ViewerApp:
         with self.rods.lock:
             entry = self.rods.add(extraction, rod_id, clamp, pins)
             self.display.sync(self.rods)
+            self.contact.rebuild()
         if record:
             added = entry
             self.history.record(
@@ -339,6 +349,7 @@ class ViewerApp:
             self._grabs.pop(rod_id, None)
             entry = self.rods.remove(rod_id)
             self.display.sync(self.rods)
+            self.contact.rebuild()
         if record:
             self.history.record(
                 Step(
@@ -356,6 +367,7 @@ class ViewerApp:
             self._grabs.clear()
             removed = self.rods.clear()
             self.display.sync(self.rods)
+            self.contact.rebuild()
         if removed:
 
             def put_back() -> None:
@@ -418,6 +430,13 @@ class ViewerApp:
                     redo=lambda: self.set_pinned(rod_id, vertex, pinned, record=False),
                 )
             )
+
+    def set_contact(self, on: bool, friction: float = 0.0) -> None:
+        """Rods keep out of the scene's solid parts and of each other, or pass through."""
+        self.rods.set_contact(on, friction)
+        self.panel.friction.disabled = not on
+        if bool(self.panel.contact.value) != on:
+            self.panel.contact.value = on  # type: ignore[misc]  # viser's values are settable
 
     def reset(self) -> None:
         """Every rod back to rest."""
@@ -664,6 +683,11 @@ class ViewerApp:
         for widget in panel.material_inputs():
             widget.on_update(material_changed)
 
+        def contact_changed(event: Any) -> None:
+            self.set_contact(bool(panel.contact.value), float(panel.friction.value))
+
+        panel.contact.on_update(contact_changed)
+        panel.friction.on_update(contact_changed)
         panel.rod.on_update(lambda event: self._refresh_panel())
 
         @panel.clamp.on_update

@@ -122,6 +122,12 @@ class Panel:
                 "Damping (1/s)", material.damping, min=0.0, max=100.0, step=0.1, hint="how fast the swing dies out"
             )
             self.gravity = gui.add_checkbox("Gravity", any(material.gravity), hint="9.81 m/s² along the scene's down")
+            self.contact = gui.add_checkbox(
+                "Contact", True, hint="rods stay out of the scene's solid parts and out of each other"
+            )
+            self.friction = gui.add_slider(
+                "Friction", 0.0, 1.0, 0.05, 0.0, hint="how much a rod sticks where it touches the scene"
+            )
         with gui.add_folder("Sketch settings", order=ORDER_SKETCH, expand_by_default=False):
             self.auto_radius = gui.add_checkbox("Auto radius", True, hint="estimate R from the image and the Gaussians")
             self.radius = gui.add_number(

@@ -15,10 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact import SceneField
 from ..errors import SketchRodGSError
 from ..extract import Extraction
 from ..rig import Rig, clamped_end_weights
-from ..rod import Rod, World
+from ..rod import ContactSettings, Rod, SimulationError, World
 from ..scene import GaussianScene
 from ..skin import BoundRod, skin_into
 from .material import CLAMPS, Clamp, Material
@@ -123,13 +124,14 @@ class RodSet:
         self.quats = scene.quats.copy()
         self.scales = scene.scales.copy()
         self._world = World()
+        self._world.contact = ContactSettings(scene=True, rods=True)
         self._entries: list[RodEntry] = []
         self._next_id = 0
         self._awake = False
         self._quiet = 0
         self._previous: list[np.ndarray] = []
         self._changed: list[np.ndarray] = []  # rows of `scene` whose Gaussian was replaced
-        self.version = 0  # bumped whenever rods are added, removed or rebuilt
+        self.layout = 0  # bumped whenever rods are added or removed (what the contact field depends on)
 
     # ----- rods -----
 
@@ -189,9 +191,9 @@ class RodSet:
                 cannot be a rod (SimulationError), or `rod_id` is taken.
         """
         ids = extraction.binding.gaussian_ids
-        if len(ids) and (ids.min() < 0 or ids.max() >= len(self.input_scene)):
-            raise SketchRodGSError(f"rod binds Gaussian {int(ids.max())} but the scene has {len(self.input_scene)}")
         with self.lock:
+            if len(ids) and (ids.min() < 0 or ids.max() >= len(self.scene)):
+                raise SketchRodGSError(f"rod binds Gaussian {int(ids.max())} but the scene has {len(self.scene)}")
             if rod_id is not None and any(e.id == rod_id for e in self._entries):
                 raise SketchRodGSError(f"rod {rod_id} exists already")
             for entry in self._entries:
@@ -213,7 +215,7 @@ class RodSet:
             self._entries.sort(key=lambda e: e.id)
             self._previous = [np.asarray(e.rod.positions) for e in self._entries]
             self._changed.append(entry.split)
-            self.version += 1
+            self.layout += 1
             return entry
 
     def remove(self, rod_id: int) -> RodEntry:
@@ -237,7 +239,7 @@ class RodSet:
                 self.quats[rows] = self.scene.quats[rows]
                 self.scales[rows] = self.scene.scales[rows]
             self._changed.append(entry.split)
-            self.version += 1
+            self.layout += 1
             return entry
 
     def clear(self) -> list[RodEntry]:
@@ -323,6 +325,11 @@ class RodSet:
         for vertex in sorted(pins):
             if rod.boundaries[vertex] == "free":
                 rod.pin(vertex)
+        if any(self.material.gravity):
+            try:  # the captured shape is the shape under gravity: it does not sag at once
+                rod.hold_under_gravity()
+            except SimulationError:  # nothing holds it up (no clamp): it falls
+                pass
         return rod
 
     def _rebuild(self, entry: RodEntry) -> None:
@@ -335,8 +342,35 @@ class RodSet:
         self.quats[rows] = self.scene.quats[rows]
         self.scales[rows] = self.scene.scales[rows]
         self._previous = [np.asarray(e.rod.positions) for e in self._entries]
-        self.version += 1
         self.wake()  # one frame sends the rest pose
+
+    # ----- contact with the scene (the field is built by `contact.SceneContact`) -----
+
+    @property
+    def contact(self) -> ContactSettings:
+        with self.lock:
+            return self._world.contact
+
+    def set_contact(self, on: bool, friction: float = 0.0) -> None:
+        """Rods keep out of the scene's solid parts and of each other (or not), with `friction`."""
+        if not (np.isfinite(friction) and friction >= 0):
+            raise SketchRodGSError(f"friction: must be >= 0, got {friction}")
+        with self.lock:
+            self._world.contact = ContactSettings(scene=on, rods=on, friction=float(friction))
+            self.wake()
+
+    def set_scene_field(self, field: SceneField | None) -> None:
+        """The scene's solid parts the rods keep out of (None: nothing)."""
+        with self.lock:
+            if field is None:
+                self._world.set_scene_field(None)
+            else:
+                self._world.set_scene_field(field.values, field.origin, field.spacing)
+
+    @property
+    def has_scene_field(self) -> bool:
+        with self.lock:
+            return self._world.has_scene_field
 
     # ----- interaction -----
 
