@@ -201,7 +201,7 @@ def test_sketch_pull_release_and_undo(session):
     page.keyboard.press("2")
     shows(page, "drag along a slender part")
     assert mode_shown(page) == "Sketch"
-    theta = np.radians(np.linspace(25, 155, 10))
+    theta = np.radians(np.linspace(25, 155, 7))
     centre_line = np.stack([SEMI_AXES[0] * np.cos(theta), SEMI_AXES[1] * np.sin(theta), 0 * theta], axis=1)
     position_before = client.camera.position.copy()
     drag(page, to_page(page, client_camera(client, 960), centre_line))
