@@ -1,7 +1,9 @@
-"""Viewer frames: the Python side of one simulation frame (simulate, skin, push to viser) and what
-it sends to the browser, with ~5k Gaussians on the pulled rod, in scenes of 100k and 1M Gaussians,
-for both ways of moving a rod's Gaussians ("exact": the rod's splat buffer re-sent each frame;
-"segments": one pose per rod segment).
+"""Viewer frames: the Python side of one simulation frame (simulate with contact, skin, push to
+viser) and what it sends to the browser, with ~5k Gaussians on the pulled rod, in scenes of 100k
+and 1M Gaussians, for both ways of moving a rod's Gaussians ("exact": the rod's splat buffer
+re-sent each frame; "segments": one pose per rod segment); and what adding a rod sends (the scene
+is sent once, in chunks; a rod re-sends only the chunks it took Gaussians from) and costs, its
+contact field included.
 
 The scene is the bundled ring plus filler Gaussians behind it. A raw websocket client (a thread
 of this process) stands in for the browser and counts the bytes the server sends. Frames are
@@ -23,6 +25,7 @@ from websockets.sync.client import connect
 from _table import print_table
 from sketchrodgs import Camera, data, extract_rod, load_scene
 from sketchrodgs.scene import GaussianScene
+from sketchrodgs.viewer.contact import SceneContact
 from sketchrodgs.viewer.display import SceneDisplay
 from sketchrodgs.viewer.rods import RodSet
 
@@ -146,20 +149,30 @@ def ring_extraction(ring: GaussianScene):
     return extract_rod(ring, camera, uv)
 
 
-def measure(scene: GaussianScene, extraction, update: str) -> dict[str, float]:
+SPLAT_BYTES = 32  # viser's buffer: 8 uint32 a Gaussian
+
+
+def measure(scene: GaussianScene, extraction, update: str, tint: bool = True) -> dict[str, float]:
     server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
     wire = WireCounter(server.get_port())
     try:
         rods = RodSet(scene, skin_each_frame=update == "exact")
-        display = SceneDisplay(server, scene, update, lambda rod_id, event: None)
-        display.show_scene(np.empty(0, np.int64))
+        contact = SceneContact(rods)
+        display = SceneDisplay(server, scene, update, lambda rod_id, vertex, event: None)
+        display.dots_wanted = tint  # the bound-Gaussian tint moves with the rod (a tab shows it)
+        with rods.lock:
+            display.sync(rods)  # the scene, sent once
         wire.settle()
+        # adding a rod as the app does: the rod set, the nodes that changed, the contact field
+        # (built on its own thread: the add itself does not wait for it)
         clock, sent = time.perf_counter(), wire.bytes
-        entry = rods.add(extraction)
-        with server.atomic():
-            display.show_scene(rods.owned_ids())
-            display.add_rod(entry)
+        with rods.lock:
+            entry = rods.add(extraction)
+            display.sync(rods)
+            built = contact.rebuild()
         add_seconds = time.perf_counter() - clock
+        built.result()
+        field_seconds = time.perf_counter() - clock
         wire.settle()
         add_bytes = wire.bytes - sent
 
@@ -181,6 +194,7 @@ def measure(scene: GaussianScene, extraction, update: str) -> dict[str, float]:
         server.flush()
         wire.settle(quiet=0.5)
         cpu = time.process_time() - cpu
+        contact.close()
         return {
             "bound": len(entry.gaussian_ids),
             "segments": entry.rod.num_vertices - 1,
@@ -188,7 +202,10 @@ def measure(scene: GaussianScene, extraction, update: str) -> dict[str, float]:
             "cpu": 1e3 * cpu / FRAMES,
             "bytes": (wire.bytes - sent) / FRAMES,
             "add_s": add_seconds,
-            "add_mb": add_bytes / 1e6,
+            "field_s": field_seconds,
+            "add_bytes": add_bytes,
+            "rod_bytes": SPLAT_BYTES * len(entry.gaussian_ids),
+            "field": rods.has_scene_field,
         }
     finally:
         wire.close()
@@ -216,16 +233,17 @@ def browser_merge_ms(totals: list[int], rod: int) -> list[float] | None:
 def main() -> None:
     ring = load_scene(data.sample("ring"))
     extraction = ring_extraction(ring)
-    rows = []
+    rows, adds = [], []
     for total in (100_000, 1_000_000):
         scene = with_filler(ring, total)
-        for update in ("exact", "segments"):
-            m = measure(scene, extraction, update)
+        for update, tint in (("exact", True), ("segments", True), ("segments", False)):
+            m = measure(scene, extraction, update, tint)
             sim_skin_push = m["simulate"] + m["skin"] + m["push"]
             rows.append(
                 [
                     f"{total:,}",
                     update,
+                    "on" if tint else "off",
                     f"{m['bound']:,}",
                     f"{m['simulate']:.2f}",
                     f"{m['skin']:.2f}",
@@ -233,10 +251,20 @@ def main() -> None:
                     f"{sim_skin_push:.2f}",
                     f"{m['cpu']:.2f}",
                     f"{m['bytes'] / 1e3:.1f}",
-                    f"{m['add_s']:.2f}",
-                    f"{m['add_mb']:.1f}",
                 ]
             )
+            if tint:  # what an add sends does not depend on it
+                adds.append(
+                    [
+                        f"{total:,}",
+                        update,
+                        f"{m['rod_bytes'] / 1e6:.2f}",
+                        f"{m['add_bytes'] / 1e6:.2f}",
+                        f"{m['add_bytes'] / m['rod_bytes']:.2f}",
+                        f"{1e3 * m['add_s']:.0f}",
+                        f"{1e3 * m['field_s']:.0f}" + ("" if m["field"] else " (none)"),
+                    ]
+                )
     totals = [10_000, 100_000, 1_000_000]
     merge = browser_merge_ms(totals, 5_000)
     if merge is None:
@@ -253,6 +281,7 @@ def main() -> None:
         [
             "scene Gaussians",
             "rod update",
+            "bound tint",
             "rod Gaussians",
             "simulate ms",
             "skin ms",
@@ -260,10 +289,14 @@ def main() -> None:
             "sim+skin+push ms",
             "process CPU ms/frame",
             "sent kB/frame",
-            "add rod s",
-            "add rod MB",
         ],
         rows,
+    )
+    print_table(
+        "adding a rod: bytes sent to a browser (the chunks it took Gaussians from, its own nodes, the "
+        "overlays) against its own Gaussians' splat bytes (target <= 2x), and time",
+        ["scene Gaussians", "rod update", "rod's splats MB", "sent MB", "sent / rod's", "add ms", "contact field ms"],
+        adds,
     )
 
 

@@ -1,23 +1,29 @@
-"""The viewer in a real browser: headless Chromium drives the page with the mouse.
+"""The viewer in a real browser: headless Chromium drives the page with the mouse and keyboard, and
+we check what the user sees (the page's text and pixels).
 
-Sketch a stroke over the bundled ring, check a rod was extracted along it; pull a rod vertex in
-Play mode, check the rod and its Gaussians moved (server state and what the browser draws); let
-go, check they come back. Skipped only where Chromium is not installed (`.ci/run` installs it).
+One session on the bundled ring: sketch a stroke over it (a rod appears, a notification says so),
+pull a rod vertex in Play and let go (the picture changes, then the ring comes back), undo (the
+rod is gone, the page says so); a stroke on the background (its message on the page); a second
+tab with its own mode; a page of another origin whose websocket is refused. Skipped only where
+Chromium is not installed (`.ci/run` installs it).
 """
 
 from __future__ import annotations
 
+import http.server
 import os
 import shutil
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
+from importlib.metadata import version
 
 import numpy as np
 import pytest
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Browser, Page, sync_playwright
 
-from sketchrodgs import Camera, data, load_scene, render
+from sketchrodgs import Camera, data, load_scene
 from sketchrodgs.viewer import ViewerApp, camera_from_viser
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium")) if p and os.path.exists(p)), None)
@@ -37,11 +43,15 @@ FLAGS = [
     "--disable-sync",
 ]
 VIEWPORT = {"width": 640, "height": 480}
-# The ring (a tube on the ellipse 0.455 x 0.136 in the XY plane) seen face-on from -z, shifted to
-# the lower left of the page: viser's panel floats on the right, a notice may sit top left.
-EYE = (-0.818, 0.307, -1.6)
-LOOK_AT = (-0.818, 0.307, 0.0)
+# The ring (a tube on the ellipse 0.455 x 0.136 in the XY plane) seen face-on from -z, in the lower
+# half of the canvas (the panel is docked on the right; notifications stack from the top left).
+EYE = (0.0, 0.45, -1.8)
+LOOK_AT = (0.0, 0.45, 0.0)
 SEMI_AXES = (0.455, 0.136)
+# What viser 1.1's own client logs whatever the viewer sends: its splat mesh has a 2D position
+# attribute, which three.js cannot bound (once per splat buffer), and its drag handler calls
+# preventDefault in a passive listener.
+VISER_CONSOLE_ERRORS = ("computeBoundingSphere(): Computed radius is NaN", "preventDefault inside passive event")
 
 
 def wait_for(condition: Callable[[], object], timeout: float, what: str, interval: float = 0.05) -> object:
@@ -60,8 +70,32 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+class Session:
+    """The app, the browser and the first tab (its viser client and console errors)."""
+
+    def __init__(self, app: ViewerApp, browser: Browser) -> None:
+        self.app, self.browser = app, browser
+        self.errors: list[str] = []
+        self.page, self.client = self.open_tab()
+
+    def open_tab(self) -> tuple[Page, object]:
+        known = set(self.app.server.get_clients())
+        page = self.browser.new_page(viewport=VIEWPORT)
+        page.set_default_timeout(15_000)
+        page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
+        # half-resolution drawing buffer: software WebGL draws each frame 4x faster
+        page.goto(f"{self.app.url}/?fixedDpr=0.5")
+        client = wait_for(
+            lambda: next((c for k, c in self.app.server.get_clients().items() if k not in known), None),
+            20,
+            "the page to connect",
+        )
+        wait_for(lambda: self.app.tabs.of(client) is not None and _camera_known(client), 20, "the browser's camera")
+        return page, client
+
+
 @pytest.fixture(scope="module")
-def session(tmp_path_factory) -> Iterator[tuple[ViewerApp, Page, object]]:
+def session(tmp_path_factory) -> Iterator[Session]:
     scene = load_scene(data.sample("ring"))
     start = Camera.look_at(EYE, LOOK_AT, up=(0.0, 1.0, 0.0), width=640, height=480, fov_y_deg=60.0)
     app = ViewerApp(
@@ -71,20 +105,11 @@ def session(tmp_path_factory) -> Iterator[tuple[ViewerApp, Page, object]]:
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=FLAGS, headless=True, timeout=30_000)
             try:
-                page = browser.new_page(viewport=VIEWPORT)
-                page.set_default_timeout(15_000)
-                # half-resolution drawing buffer: software WebGL draws each frame 4x faster
-                page.goto(f"{app.url}/?fixedDpr=0.5")
-                client = wait_for(
-                    lambda: next(iter(app.server.get_clients().values()), None), 20, "the page to connect"
-                )
-                wait_for(lambda: _camera_known(client), 20, "the browser's camera")
-                # the page opens at the app's initial camera
-                wait_for(lambda: np.allclose(client.camera.position, EYE, atol=1e-4), 10, "the initial camera")
+                s = Session(app, browser)
+                wait_for(lambda: np.allclose(s.client.camera.position, EYE, atol=1e-4), 10, "the initial camera")
                 # the splats are sorted off the main thread: wait until the ring is drawn
-                wait_for(lambda: mask(browser_render(client)).sum() > 2000, 30, "the browser to draw the splats", 0.5)
-                canvas_box(page)
-                yield app, page, client
+                wait_for(lambda: ring_mask(s.page).sum() > 2000, 30, "the browser to draw the ring", 0.5)
+                yield s
             finally:
                 browser.close()
     finally:
@@ -98,18 +123,6 @@ def _camera_known(client) -> bool:
         return False
 
 
-def browser_render(client) -> np.ndarray:
-    """What the browser draws now, at its canvas size (client.get_render)."""
-    return client.get_render(height=client.camera.image_height, width=client.camera.image_width, timeout=30)
-
-
-def client_camera(client, width: int) -> Camera:
-    cam = client.camera
-    return camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, width)
-
-
-_CANVAS_BOXES: dict[int, dict] = {}
-
 CANVAS_RECT_JS = """() => {
   const canvases = [...document.querySelectorAll("canvas")].map(c => c.getBoundingClientRect());
   const r = canvases.reduce((a, b) => (b.width * b.height > a.width * a.height ? b : a));
@@ -118,11 +131,31 @@ CANVAS_RECT_JS = """() => {
 
 
 def canvas_box(page: Page) -> dict:
-    """Page rectangle of the 3D canvas (the largest canvas; measured once per page, in one call:
-    every round trip waits for a frame, which software WebGL draws slowly)."""
-    if id(page) not in _CANVAS_BOXES:
-        _CANVAS_BOXES[id(page)] = page.evaluate(CANVAS_RECT_JS)
-    return _CANVAS_BOXES[id(page)]
+    """Page rectangle of the 3D canvas (the largest canvas)."""
+    return page.evaluate(CANVAS_RECT_JS)
+
+
+def screenshot(page: Page) -> np.ndarray:
+    """What the user sees in the canvas, (H, W, 3) uint8."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    box = canvas_box(page)
+    png = page.screenshot(clip=box)
+    with Image.open(BytesIO(png)) as image:
+        return np.asarray(image.convert("RGB"))
+
+
+def ring_mask(page: Page) -> np.ndarray:
+    """Where the (red-brown) ring is on viser's white background, in a screenshot."""
+    image = screenshot(page).astype(np.int32)
+    return (image[..., 0] - image[..., 2] > 40) & (image[..., 1] < 150)
+
+
+def client_camera(client, width: int) -> Camera:
+    cam = client.camera
+    return camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, width)
 
 
 def to_page(page: Page, camera: Camera, points: np.ndarray) -> np.ndarray:
@@ -135,117 +168,159 @@ def to_page(page: Page, camera: Camera, points: np.ndarray) -> np.ndarray:
     )
 
 
-def drag(page: Page, path: np.ndarray, pause: float = 0.06, hold: float = 0.0) -> None:
+def drag(page: Page, path: np.ndarray, pause: float = 0.06) -> None:
     """Press at path[0], move through the path (slower than viser's ~20 Hz drag updates), release."""
     page.mouse.move(*path[0])
     page.mouse.down()
     for x, y in path[1:]:
-        # each move waits for a frame, a few tenths of a second in software WebGL: keep them few
         page.mouse.move(float(x), float(y))
         time.sleep(pause)
-    time.sleep(hold)
     page.mouse.up()
 
 
-def mask(image: np.ndarray) -> np.ndarray:
-    """Where the (red-brown) ring is on viser's white background."""
-    return image[..., :3].astype(np.int32).min(axis=2) < 200
+def shows(page: Page, text: str, timeout: float = 30) -> None:
+    """Wait until `text` is visible on the page."""
+    page.get_by_text(text).first.wait_for(state="visible", timeout=timeout * 1000)
 
 
-def test_browser_camera_matches_our_projection(session):
-    """What the browser draws lines up with our CPU render from the converted camera."""
-    app, page, client = session
-    width, height = client.camera.image_width, client.camera.image_height
-    shot = client.get_render(height=height, width=width, timeout=30)
-    assert shot.shape[:2] == (height, width) and shot.std() > 5
-    ours = render(app.scene, client_camera(client, width), background=(1.0, 1.0, 1.0))
-    theirs, mine = mask(shot), ours.alpha > 0.5
-    iou = (theirs & mine).sum() / (theirs | mine).sum()
-    assert mine.sum() > 2000 and iou > 0.85, f"IoU {iou:.2f}"
-    # the panel's screenshot button does the same through the app
-    path = app.screenshot(client)
-    from PIL import Image
-
-    with Image.open(path) as image:
-        assert image.size == (width, height) and np.asarray(image).std() > 5
+def mode_shown(page: Page) -> str:
+    """The mode whose button is highlighted (its colour differs from the two others')."""
+    colours = {
+        mode: page.get_by_role("button", name=f"{mode} (", exact=False).first.evaluate(
+            "b => getComputedStyle(b).backgroundColor"
+        )
+        for mode in ("View", "Sketch", "Play")
+    }
+    [active] = [m for m, c in colours.items() if list(colours.values()).count(c) == 1]
+    return active
 
 
-def test_sketch_extracts_a_rod_along_the_stroke(session):
-    app, page, client = session
-    page.get_by_role("button", name="Sketch", exact=True).click()
-    wait_for(lambda: app.mode == "Sketch", 10, "Sketch mode")
-    theta = np.radians(np.linspace(25, 155, 10))
+def test_sketch_pull_release_and_undo(session):
+    app, page, client = session.app, session.page, session.client
+    assert mode_shown(page) == "View"
+    page.keyboard.press("2")
+    shows(page, "drag along a slender part")
+    assert mode_shown(page) == "Sketch"
+    theta = np.radians(np.linspace(25, 155, 7))
     centre_line = np.stack([SEMI_AXES[0] * np.cos(theta), SEMI_AXES[1] * np.sin(theta), 0 * theta], axis=1)
-    camera = client_camera(client, 960)
     position_before = client.camera.position.copy()
-    drag(page, to_page(page, camera, centre_line))
-    wait_for(lambda: app.extractions == 1 or app.last_error, 30, "the extraction")
-    assert app.last_error is None, app.last_error
-    # the camera stayed still while sketching
-    assert np.allclose(client.camera.position, position_before, atol=1e-6)
+    drag(page, to_page(page, client_camera(client, 960), centre_line))
+    shows(page, "Gaussians follow it")  # the spinner turned into the result
+    shows(page, "Rod 0")
+    assert np.allclose(client.camera.position, position_before, atol=1e-6)  # the camera stayed still
     [entry] = app.rods.entries
     polyline = entry.extraction.polyline.astype(np.float64)
-    # every vertex on the ring's centre line (the ellipse), the rod spanning the stroke's arc
     angle = np.arctan2(polyline[:, 1] / SEMI_AXES[1], polyline[:, 0] / SEMI_AXES[0])
-    on_ellipse = np.stack([SEMI_AXES[0] * np.cos(angle), SEMI_AXES[1] * np.sin(angle)], axis=1)
-    off = np.linalg.norm(polyline[:, :2] - on_ellipse, axis=1)
-    assert np.abs(polyline[:, 2]).max() < entry.extraction.radius
-    assert off.max() < entry.extraction.radius, off.max()
-    span = np.degrees([angle.min(), angle.max()])
-    assert span[0] < 45 and span[1] > 135, span
-    assert len(entry.gaussian_ids) > 1000
-    # the stroke arrived as a polyline of many samples, not just its ends
-    assert len(entry.extraction.stroke) >= 8
+    assert np.degrees(angle.min()) < 45 and np.degrees(angle.max()) > 135
+    assert page.get_by_role("button", name="Remove rod (Delete)").is_enabled()
 
-
-def test_pull_moves_rod_and_gaussians_and_release_brings_them_back(session):
-    app, page, client = session
-    [entry] = app.rods.entries
-    page.get_by_role("button", name="Play", exact=True).click()
-    wait_for(lambda: app.mode == "Play", 10, "Play mode")
+    page.keyboard.press("3")
+    shows(page, "drag a ball on a rod")
+    assert mode_shown(page) == "Play"
     time.sleep(0.5)  # let the handles appear
-    width, height = client.camera.image_width, client.camera.image_height
-    before = client.get_render(height=height, width=width, timeout=30)
+    before = ring_mask(page)
     rest = np.asarray(entry.rod.rest_positions)
-    ids = entry.gaussian_ids
-    rest_means = app.scene.means[ids].astype(np.float64)
-    node = app.display._rods[entry.id].splats[0]
-    vertex = len(rest) // 2
-    camera = client_camera(client, width)
-    start = to_page(page, camera, rest[vertex : vertex + 1])[0]
-    path = start + np.outer(np.linspace(0, 1, 6), [0.0, -45.0])  # up the screen by 45 px
-
+    shown = app.display.shown_handles(entry.id)
+    vertex = int(shown[len(shown) // 2])
+    start = to_page(page, client_camera(client, 960), rest[vertex : vertex + 1])[0]
     page.mouse.move(*start)
     page.mouse.down()
-    for x, y in path[1:]:
-        page.mouse.move(float(x), float(y))
+    for dy in np.linspace(0, -45, 6)[1:]:  # up the screen by 45 px
+        page.mouse.move(float(start[0]), float(start[1] + dy))
         time.sleep(0.06)
     try:
         wait_for(
-            lambda: np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex]) > 0.05,
+            lambda: np.asarray(entry.rod.positions)[vertex, 1] - rest[vertex, 1] > 0.05,
             10,
             "the grabbed vertex to follow the pointer",
         )
         time.sleep(0.5)
-        moved = np.asarray(entry.rod.positions)
-        assert moved[vertex, 1] - rest[vertex, 1] > 0.05  # up the screen is +y in this view
-        assert np.abs(moved[[0, -1]] - rest[[0, -1]]).max() < 1e-6  # the clamped ends stayed
-        with app.rods.lock:
-            means_now = app.rods.means[ids].astype(np.float64)
-            sent = np.asarray(node.centers, np.float64) * app.display.unit  # nodes hold centres / unit
-        assert np.linalg.norm(means_now - rest_means, axis=1).max() > 0.03
-        assert np.linalg.norm(sent - rest_means, axis=1).max() > 0.03  # what the browser was sent moved too
-        pulled = client.get_render(height=height, width=width, timeout=30)
+        assert np.abs(np.asarray(entry.rod.positions)[[0, -1]] - rest[[0, -1]]).max() < 1e-6  # clamped ends
+        pulled = ring_mask(page)
     finally:
         page.mouse.up()
-    assert pulled.shape == before.shape and pulled.std() > 5
-    assert (mask(pulled) ^ mask(before)).sum() > 300  # the picture changed where the ring moved
+    changed = (pulled ^ before).sum()
+    assert changed > 300, changed  # the user sees the ring bend
 
-    wait_for(lambda: not app.rods.awake and not app.rods.grabbed(), 15, "the rod to come to rest")
-    assert np.abs(np.asarray(entry.rod.positions) - rest).max() < 1e-3
-    with app.rods.lock:
-        assert np.abs(app.rods.means[ids] - rest_means).max() < 1e-3
-        assert np.abs(np.asarray(node.centers, np.float64) * app.display.unit - rest_means).max() < 1e-3
-    after = client.get_render(height=height, width=width, timeout=30)
-    assert (mask(after) ^ mask(before)).sum() < 0.2 * (mask(pulled) ^ mask(before)).sum()
-    assert "frame" in app.loop.timings.mean()
+    pulled_by = np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex])
+    time.sleep(1.0)  # it swings back (and on, about its rest shape, a few times)
+    assert np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex]) < 0.6 * pulled_by
+    page.keyboard.press("r")  # every rod back to rest
+    wait_for(lambda: not app.rods.awake, 5, "the rod to rest")
+    assert np.abs(np.asarray(entry.rod.positions) - rest).max() < 1e-6
+    time.sleep(0.3)
+    assert (ring_mask(page) ^ before).sum() < 0.3 * changed  # the user sees the ring as it was
+
+    page.keyboard.press("Control+z")
+    shows(page, "Undone: rod 0")
+    assert len(app.rods) == 0
+    assert page.get_by_role("button", name="Remove rod (Delete)").is_disabled()
+    assert page.get_by_role("button", name="Redo (Ctrl+Shift+Z)").is_enabled()
+    assert not [e for e in session.errors if not any(known in e for known in VISER_CONSOLE_ERRORS)], session.errors
+
+
+def test_a_failing_stroke_shows_its_message(session):
+    app, page = session.app, session.page
+    page.keyboard.press("2")
+    shows(page, "drag along a slender part")
+    box = canvas_box(page)
+    # the canvas' lower right, where there is only background
+    x, y = box["x"] + 0.8 * box["width"], box["y"] + 0.85 * box["height"]
+    drag(page, np.array([[x, y], [x + 40, y - 10], [x + 80, y - 20]]))
+    shows(page, "The stroke is on the background")
+    assert len(app.rods) == 0
+    page.mouse.click(x, y)  # a click in Sketch says why nothing happened
+    shows(page, "A click does not draw")
+
+
+def test_a_second_tab_keeps_its_own_mode(session):
+    app, page = session.app, session.page
+    page.keyboard.press("3")
+    shows(page, "drag a ball on a rod")
+    other, other_client = session.open_tab()
+    try:
+        shows(other, "drag to orbit")  # a new tab opens in View
+        other.keyboard.press("2")
+        shows(other, "drag along a slender part")
+        assert mode_shown(other) == "Sketch" and app.mode_of(other_client) == "Sketch"
+        time.sleep(0.3)
+        assert mode_shown(page) == "Play" and app.mode_of(session.client) == "Play"
+        assert page.get_by_text("drag a ball on a rod").first.is_visible()
+    finally:
+        other.close()
+
+
+FOREIGN_PAGE = """<!doctype html><title>elsewhere</title><body>connecting</body><script>
+const socket = new WebSocket("ws://127.0.0.1:%d", ["viser-v%s"]);  // as viser's own client
+socket.binaryType = "arraybuffer";
+let messages = 0;
+socket.onmessage = () => { messages += 1; };
+socket.onclose = (e) => { document.body.textContent = "closed " + e.code + " after " + messages + " messages"; };
+</script>"""
+
+
+def test_a_page_of_another_origin_is_refused(session):
+    app = session.app
+    body = (FOREIGN_PAGE % (app.port, version("viser"))).encode()
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    refused = app.origins.refused
+    page = session.browser.new_page(viewport=VIEWPORT)
+    try:
+        page.goto(f"http://127.0.0.1:{server.server_address[1]}/")
+        shows(page, "closed 1008 after 0 messages", timeout=15)  # nothing of the scene reached it
+        assert app.origins.refused == refused + 1
+    finally:
+        page.close()
+        server.shutdown()

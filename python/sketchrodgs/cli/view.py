@@ -31,6 +31,27 @@ def _fps(value: str) -> float:
     return fps
 
 
+def _seconds(value: str) -> float:
+    try:
+        seconds = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {value!r}") from None
+    if not 0.05 <= seconds <= 60:
+        raise argparse.ArgumentTypeError(f"must be in 0.05..60 seconds, got {value}")
+    return seconds
+
+
+def _origin(value: str) -> str:
+    from ..errors import SketchRodGSError
+    from ..viewer.origin import parse_origin
+
+    try:
+        parse_origin(value)
+    except SketchRodGSError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", type=scene_path, help=scene_help())
     parser.add_argument(
@@ -40,6 +61,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--host",
         default="127.0.0.1",
         help="interface to listen on (default 127.0.0.1, this machine only; 0.0.0.0 exposes the viewer to the network)",
+    )
+    parser.add_argument(
+        "--allow-origin",
+        action="append",
+        type=_origin,
+        default=[],
+        metavar="ORIGIN",
+        help="also let pages from ORIGIN (e.g. http://myhost:8080, as the browser's address bar shows it) "
+        "use the viewer; only its own page at 127.0.0.1 or localhost (or --host) may by default",
     )
     parser.add_argument(
         "--rod",
@@ -73,6 +103,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "for large scenes); auto picks by scene size",
     )
     parser.add_argument("--no-clamp", action="store_true", help="leave rod ends free instead of clamping them")
+    parser.add_argument(
+        "--no-contact",
+        action="store_true",
+        help="let rods pass through the scene and each other (the panel's Contact switch starts off)",
+    )
+    parser.add_argument(
+        "--swing-period",
+        type=_seconds,
+        default=0.5,
+        metavar="S",
+        help="seconds one swing of a let-go rod takes (default 0.5); each rod's stiffness follows from it",
+    )
 
 
 class _Stopped(Exception):
@@ -87,6 +129,20 @@ def _stop(signum: int, frame: object) -> None:
     raise _Stopped(signum)
 
 
+def _exposed(host: str, port: int) -> str:
+    """The warning for a --host other machines can reach."""
+    text = (
+        f"--host {host} serves the viewer to other machines: anyone who can reach this one can open it, "
+        "see the scene and change its rods. "
+    )
+    if host in ("", "0.0.0.0", "::"):
+        return text + (
+            f"Browsers are let in at http://127.0.0.1:{port} only, unless you allow the address they open, "
+            f"e.g. --allow-origin http://<this machine's name or address>:{port}"
+        )
+    return text + f"Browsers may open it at http://{host}:{port}."
+
+
 def run(args: argparse.Namespace) -> int:
     import signal
     import sys
@@ -96,9 +152,10 @@ def run(args: argparse.Namespace) -> int:
     from ..extract import load_rod
     from ..framing import frame_scene, scene_up
     from ..io import load_scene
-    from ..rod import RodParams
     from ..scene_identity import check_rod_scene
     from ..viewer import ViewerApp
+    from ..viewer.material import Material
+    from ..viewer.origin import is_loopback
     from ._framing import camera_file, scene_cameras
     from ._outputs import check_folder
 
@@ -115,20 +172,33 @@ def run(args: argparse.Namespace) -> int:
         camera = loaded[0][0].camera
     else:
         camera = cameras[0] if cameras else frame_scene(scene, up.vector)
-    params = RodParams.from_dict({**loaded[0][1], "radius": RodParams().radius}) if loaded and loaded[0][1] else None
+    # a rod file's damping, density and gravity; its stiffness follows from the swing period
+    saved = loaded[0][1] if loaded else {}
+    default = Material()
+    g = [float(v) for v in saved.get("gravity", default.gravity)]
+    material = Material(
+        swing_period=args.swing_period,
+        damping=float(saved.get("damping", default.damping)),
+        density=float(saved.get("density", default.density)),
+        gravity=(g[0], g[1], g[2]),
+    )
     app = ViewerApp(
         scene,
         host=args.host,
         port=args.port,
         rods=[e for e, _ in loaded],
-        params=params,
-        clamp_ends=not args.no_clamp,
+        material=material,
+        clamp="none" if args.no_clamp else "both",
         up=up.axis,
         camera=camera,
         output_dir=args.output_dir,
         fps=args.fps,
         splat_update=args.splat_update,
+        allow_origins=args.allow_origin,
+        contact=not args.no_contact,
     )
+    if not is_loopback(args.host):
+        print(f"sketchrodgs view: warning: {_exposed(args.host, app.port)}", file=sys.stderr, flush=True)
     # Stop cleanly on SIGTERM, and on SIGINT unless it is ignored (a background job's is): a
     # server that only Ctrl-C stops cannot be stopped in the background.
     handled = [signal.SIGTERM] + ([signal.SIGINT] if signal.getsignal(signal.SIGINT) != signal.SIG_IGN else [])

@@ -1,23 +1,23 @@
 """The interactive viewer: a viser page driven by the CPU pipeline.
 
-Modes (the panel's "Mode" buttons):
-
-- View: orbit, pan, zoom (viser's camera controls).
-- Sketch: an invisible box around camera and scene (opacity 0, back faces) catches left drags, so
-  a drag draws a stroke instead of orbiting. At the end of the stroke the rod under it is
-  extracted from a render of the client's camera at the working width (a worker thread), drawn
-  (polyline, segmented Gaussians), and its Gaussians move to their own splat nodes.
-- Play: each rod's vertices are draggable handles; dragging one grabs that vertex (its target is
-  the pointer on the camera-facing plane through the handle), letting go releases it. A
-  simulation thread steps the rods, skins and pushes every frame (`simulation.py`).
+Each browser tab has its own mode (`tabs.py`): View (orbit, pan, zoom), Sketch (a left drag draws
+a stroke; the rod under it is extracted from a render of the tab's camera at the working width, on
+a worker thread) and Play (drag a rod's ball to grab that vertex, let go to release it; click a
+ball to pin it). A simulation thread steps the rods, skins and pushes every frame
+(`simulation.py`). Rod operations (extract, remove, clamps, pins, material) can be undone
+(`history.py`); results and errors are notifications on the tab concerned (`feedback.py`); only
+pages of allowed origins may connect (`origin.py`).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import io
 import logging
 import math
 import threading
 import time
+import zipfile
 from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -29,16 +29,22 @@ import viser
 from ..camera import Camera
 from ..errors import SketchRodGSError
 from ..extract import Extraction
+from ..framing import frame_scene
 from ..images import save_png
 from ..io import save_scene
-from ..rod import RodParams
 from ..scene import GaussianScene
-from .camera import DEFAULT_WORKING_WIDTH, camera_from_viser, viser_view
+from .camera import DEFAULT_WORKING_WIDTH, ViserView, framing_view, viser_view
+from .contact import SceneContact
 from .display import SPLAT_UPDATES, SceneDisplay
-from .panel import MODES, NO_ROD, Panel
+from .feedback import Feedback, Kind, Notice, describe_failure
+from .history import History, Step
+from .material import CLAMPS, Clamp, Material
+from .origin import OriginGuard, allowed_origins
+from .panel import CAMERA_VIEWS, CLAMP_LABELS, NO_ROD, Panel, clamp_of
 from .rods import RodEntry, RodSet
 from .simulation import SimulationLoop
 from .sketch import Stroke, extract
+from .tabs import MODES, Tab, Tabs
 
 logger = logging.getLogger("sketchrodgs")
 
@@ -54,7 +60,8 @@ UP_DIRECTIONS = {
 # move as per-segment nodes, so that the browser need not re-merge a large scene 60 times a
 # second (measured in benches/bench_viewer.py).
 AUTO_EXACT_LIMIT = 50_000
-STATUS_INTERVAL = 0.5  # seconds between timing updates in the panel
+TIMINGS_INTERVAL = 0.5  # seconds between timing updates in the panel
+PRESET_ORBITS = {"Front": (0.0, 0.0), "Side": (90.0, 0.0), "Top": (0.0, 89.0)}  # azimuth, elevation
 SketchUpdate = Literal["auto", "exact", "segments"]
 
 
@@ -66,15 +73,20 @@ class ViewerApp:
         host: interface to listen on (127.0.0.1: this machine only).
         port: port (viser picks the next free one if taken; see `port`).
         rods: extractions to start with (e.g. from `load_rod`).
-        params: rod material (default `RodParams()`; the radius comes from each extraction).
-        clamp_ends: clamp both ends of every rod.
+        material: how the rods swing (default `Material()`: a 0.5 s swing; the radius comes from
+            each extraction, and each rod's stiffness from its size and the swing period).
+        clamp: how new rods are held: "both" ends, "start", "end" or "none".
         up: the scene's up direction ("+x" ... "-z"); -y for COLMAP-derived captures.
         camera: the view browsers open with (default: the first rod's camera, else framing the scene).
-        output_dir: where exports, rod files and screenshots go.
+        output_dir: where exports are written (they are also downloaded by the browser).
         fps: simulation frames per second.
         splat_update: how rods' Gaussians are sent each frame ("exact", "segments", or "auto":
             exact up to AUTO_EXACT_LIMIT Gaussians).
         working_width: width in pixels of the render a stroke is traced on.
+        allow_origins: origins of pages other than the viewer's own that may connect
+            (`origin.py`), e.g. "http://myhost:8080".
+        contact: rods keep out of the scene's solid parts and of each other (`contact.py`).
+        friction: Coulomb friction of the rods against the scene.
     """
 
     def __init__(
@@ -84,14 +96,17 @@ class ViewerApp:
         host: str = "127.0.0.1",
         port: int = 8080,
         rods: Sequence[Extraction] = (),
-        params: RodParams | None = None,
-        clamp_ends: bool = True,
+        material: Material | None = None,
+        clamp: Clamp = "both",
         up: str = "-y",
         camera: Camera | None = None,
         output_dir: str | Path = ".",
         fps: float = 60.0,
         splat_update: SketchUpdate = "auto",
         working_width: int = DEFAULT_WORKING_WIDTH,
+        allow_origins: Sequence[str] = (),
+        contact: bool = True,
+        friction: float = 0.0,
     ) -> None:
         if up not in UP_DIRECTIONS:
             raise SketchRodGSError(f"up: expected one of {', '.join(UP_DIRECTIONS)}, got {up!r}")
@@ -101,19 +116,18 @@ class ViewerApp:
             raise SketchRodGSError(f"splat update: expected auto, exact or segments, got {splat_update!r}")
         if not (math.isfinite(fps) and fps > 0):
             raise SketchRodGSError(f"fps: must be > 0, got {fps}")
+        if clamp not in CLAMPS:
+            raise SketchRodGSError(f"clamp: expected one of {', '.join(CLAMPS)}, got {clamp!r}")
         self.scene = scene
         self.up = np.array(UP_DIRECTIONS[up])
         self.output_dir = Path(output_dir)
         self.splat_update = splat_update
-        self.mode = "View"
         self.last_extraction: Extraction | None = None
         self.last_error: str | None = None
         self.extractions = 0  # strokes that made a rod
-        self._stroke: Stroke | None = None
-        self._stroke_depth = 0.0
-        self._grab_offsets: dict[int, np.ndarray] = {}
-        self._status_lock = threading.Lock()
-        self._last_timing_update = 0.0
+        self._grabs: dict[int, np.ndarray] = {}  # rod id -> offset from the pointer to the grabbed vertex
+        self._panel_lock = threading.RLock()
+        self._last_timings = 0.0
         self._screenshots = 0
         lo, hi = (scene.means.min(axis=0), scene.means.max(axis=0)) if len(scene) else (np.zeros(3), np.ones(3))
         self._centre = (lo.astype(np.float64) + hi) / 2
@@ -121,38 +135,39 @@ class ViewerApp:
 
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         try:
-            self.server.gui.configure_theme(control_width="medium", show_share_button=False)
+            # before anything is in the scene: a page of another origin gets nothing
+            self.origins = OriginGuard(self.server, allowed_origins(host, self.server.get_port(), allow_origins))
+            gui = self.server.gui
+            gui.configure_theme(control_width="small", show_share_button=False)
+            gui.main_panel.dock_right()
             self.server.scene.set_up_direction(tuple(self.up))
             self.server.scene.world_axes.visible = False
+            for branch in ("/overlay", "/overlay/bound", "/play"):  # each tab shows or hides these
+                self.server.scene.add_frame(branch, show_axes=False)
+            material = material or Material()
+            self.panel = Panel(gui, material, working_width, len(scene))
+            self.feedback = Feedback(self.server)
+            self.history = History()
             # moving Gaussians by segment poses needs no per-frame skinning (exports skin on demand)
-            self.rods = RodSet(scene, params or RodParams(), clamp_ends, skin_each_frame=splat_update == "exact")
-            self.display = SceneDisplay(self.server, scene, splat_update, self._on_handle_drag)
-            self.display.show_scene(np.empty(0, np.int64))
-            self.panel = Panel(self.server.gui, self.rods.params, clamp_ends, working_width)
-            self._wire_panel()
-            self._box = self.server.scene.add_box(
-                "/sketch/surface",
-                color=(255, 255, 255),
-                dimensions=(1.0, 1.0, 1.0),
-                opacity=0.0,
-                side="back",
-                cast_shadow=False,
-                receive_shadow=False,
-                visible=False,
-            )
-            self._box.on_drag("left")(self._on_sketch_drag)
+            self.rods = RodSet(scene, material, clamp, skin_each_frame=splat_update == "exact")
+            self.contact = SceneContact(self.rods)
+            self.display = SceneDisplay(self.server, scene, splat_update, self._on_handle_drag, self._on_handle_click)
+            with self.rods.lock:
+                self.display.sync(self.rods)  # the scene, sent once
+            self.panel.scene_loaded()
             self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sketchrodgs-extract")
             for extraction in rods:
-                self.add_extraction(extraction)
-            self._set_initial_camera(camera or (rods[0].camera if rods else None))
+                self.add_extraction(extraction, record=False)
+            self._start_view = self._set_initial_camera(camera or (rods[0].camera if rods else None))
+            self._wire_panel()
+            self.panel.friction.value = friction  # type: ignore[misc]  # viser's values are settable
+            self.set_contact(contact, friction)
+            self.tabs = Tabs(self.server, self._make_tab)
             self.loop = SimulationLoop(self.rods, self.display, fps, on_frame=self._frame_done)
             self.loop.start()
         except BaseException:
             self.server.stop()
             raise
-        self._set_status(
-            f"{len(scene):,} Gaussians ({self.splat_update} rod updates). Choose Sketch and drag along a slender part."
-        )
 
     # ----- lifetime -----
 
@@ -172,6 +187,7 @@ class ViewerApp:
         """Stop the simulation, the extraction worker and the server."""
         self.loop.stop()
         self._worker.shutdown(wait=False, cancel_futures=True)
+        self.contact.close()
         self.server.stop()
 
     def __enter__(self) -> ViewerApp:
@@ -180,167 +196,393 @@ class ViewerApp:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # ----- modes -----
+    # ----- tabs and modes -----
 
-    def set_mode(self, mode: str) -> None:
-        """Switch to "View", "Sketch" or "Play"."""
+    def _make_tab(self, client: Any) -> Tab:
+        return Tab(
+            client,
+            self.panel.view_folder,
+            (self._centre, self._extent),
+            on_change=self._tab_changed,
+            on_stroke=self._stroke_drawn,
+            on_click=lambda tab, text: self.feedback.notify(tab.client, "info", "Nothing drawn", text),
+            on_view=self._size_handles,
+            working_width=lambda: int(self.panel.working_width.value),
+        )
+
+    def set_mode(self, mode: str, client: Any = None) -> None:
+        """Switch `client`'s tab (every tab when None) to "View", "Sketch" or "Play"."""
         if mode not in MODES:
             raise SketchRodGSError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
-        if mode != "Play":
-            for rod_id in list(self._grab_offsets):
-                self.rods.release(rod_id)
-            self._grab_offsets.clear()
-        if mode == "Sketch":
-            self._place_sketch_box()
-        else:
-            self.display.clear_stroke()
-        self._box.visible = mode == "Sketch"
-        self.display.set_visibility(handles=mode == "Play", segmented=mode == "Sketch")
-        self.mode = mode
-        self.panel.mode_text.content = self.panel.mode_markdown(mode)
+        for tab in self.tabs.all() if client is None else [t for t in [self.tabs.of(client)] if t]:
+            tab.set_mode(mode)
 
-    def _place_sketch_box(self) -> None:
-        """Size the invisible box to hold the scene and every client's camera, with room to spare."""
-        reach = self._extent
-        for client in self.server.get_clients().values():
-            try:
-                reach = max(reach, float(np.linalg.norm(client.camera.position - self._centre)))
-            except AssertionError:  # that client has not reported its camera yet
-                continue
-        self._box.position = tuple(self._centre)
-        self._box.dimensions = (20 * reach,) * 3
+    def mode_of(self, client: Any) -> str | None:
+        """The mode of `client`'s tab (None when it is not connected)."""
+        tab = self.tabs.of(client)
+        return tab.mode if tab is not None else None
+
+    def _tab_changed(self, tab: Tab) -> None:
+        if tab.mode != "Play":  # what this tab held is let go
+            for rod_id in list(self._grabs):
+                self._grabs.pop(rod_id, None)
+                self.rods.release(rod_id)
+        self.display.show_dots(self.rods, any(t.shows_dots for t in self.tabs.all()))
+        if tab.mode == "Play":
+            self._size_handles(tab)
+
+    def _size_handles(self, tab: Tab) -> None:
+        camera = tab.camera()
+        if camera is not None:
+            with self.rods.lock:
+                self.display.size_handles(self.rods, camera)
+
+    def act(self, action: str, client: Any = None) -> None:
+        """Do what a keyboard shortcut names (`panel.SHORTCUTS`) for `client`'s tab."""
+        tab = self.tabs.of(client)
+        if action in MODES:
+            self.set_mode(action, client)
+        elif action == "Undo":
+            self.undo(client)
+        elif action == "Redo":
+            self.redo(client)
+        elif action == "Frame":
+            self.frame_rod(client)
+        elif action == "Start":
+            self.show_view("Start", client)
+        elif action == "Handles" and tab is not None:
+            tab.set_toggles(handles=not tab.show_handles)
+        elif action == "Bound" and tab is not None:
+            tab.set_toggles(bound=not tab.show_bound)
+        elif action == "Reset":
+            self.reset()
+        elif action == "Remove":
+            entry = self.selected_rod()
+            if entry is None:
+                self.feedback.notify(client, "info", "No rod to remove", "Sketch over a slender part to make one.")
+            else:
+                self.remove_rod(entry.id, client=client)
 
     # ----- sketch -----
 
-    async def _on_sketch_drag(self, event: Any) -> None:
-        # async: drag phases then arrive in order (viser awaits async callbacks on its loop)
-        if self.mode != "Sketch":
-            return
-        if event.phase == "start":
-            cam = event.client.camera
-            width = int(self.panel.working_width.value)
-            self._stroke = Stroke(camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, width))
-            # draw the stroke halfway to the orbit centre: in front of what is looked at (viser washes
-            # out lines very close to the camera)
-            self._stroke_depth = max(2 * cam.near, 0.5 * float(np.linalg.norm(cam.look_at - cam.position)))
-            self._stroke.add(event.start_screen_pos)
-        stroke = self._stroke
-        if stroke is None:
-            return
-        stroke.add(event.end_screen_pos)
-        self.display.show_stroke(stroke.world_points(self._stroke_depth))
-        if event.phase == "end":
-            self._stroke = None
-            self._worker.submit(self._extract, stroke)
+    def _stroke_drawn(self, tab: Tab, stroke: Stroke) -> None:
+        notice = self.feedback.notify(tab.client, "busy", "Extracting the rod…", "Following your stroke in the scene.")
+        self._worker.submit(self._extract, stroke, tab, notice)
 
-    def _extract(self, stroke: Stroke) -> RodEntry | None:
+    def sketch(self, stroke: Stroke) -> Future[RodEntry | None]:
+        """Extract the rod under `stroke` as if it had been drawn (on the extraction worker); the
+        result is shown on every tab."""
+        return self._worker.submit(self._extract, stroke)
+
+    def _extract(self, stroke: Stroke, tab: Tab | None = None, notice: Notice | None = None) -> RodEntry | None:
         clock = time.perf_counter()
         try:
             extraction = extract(self.rods.deformed_scene(), stroke, self.panel.sketch_settings())
             entry = self.add_extraction(extraction)
-        except SketchRodGSError as exc:
-            self.last_error = str(exc)
-            self.display.show_stroke(stroke.world_points(self._stroke_depth), failed=True)
-            self._set_status(f"No rod: {exc}")
-            return None
         except Exception as exc:  # keep the viewer alive; say what happened
-            logger.exception("extraction failed")
-            self.last_error = f"{type(exc).__name__}: {exc}"
-            self._set_status(f"Extraction failed: {self.last_error}")
+            if not isinstance(exc, SketchRodGSError):
+                logger.exception("extraction failed")
+            self.last_error = describe_failure(exc)
+            if tab is not None:
+                tab.show_stroke(stroke, failed=True)
+            self._say(tab, notice, "error", "No rod", self.last_error)
             return None
         seconds = time.perf_counter() - clock
         self.last_error = None
         self.last_extraction = extraction
         self.extractions += 1
-        self._set_status(
-            f"Rod {entry.id}: {len(extraction.polyline)} vertices, {len(entry.gaussian_ids):,} Gaussians, "
-            f"R = {extraction.radius:.4g}, stroke covered {100 * extraction.coverage:.0f} %, "
-            f"{1e3 * seconds:.0f} ms ({', '.join(f'{k} {1e3 * v:.0f}' for k, v in extraction.timings.items())} ms). "
-            "Play to pull it."
+        if tab is not None:
+            tab.clear_stroke()
+        self._say(
+            tab,
+            notice,
+            "done",
+            f"Rod {entry.id}",
+            f"{len(entry.gaussian_ids):,} Gaussians follow it ({seconds:.1f} s). Press Play (3) to pull it.",
         )
+        logger.info("rod %d extracted in %.0f ms: %s", entry.id, 1e3 * seconds, extraction.timings)
         return entry
 
-    def sketch(self, stroke: Stroke) -> Future[RodEntry | None]:
-        """Extract the rod under `stroke` as if it had been drawn (on the extraction worker)."""
-        return self._worker.submit(self._extract, stroke)
+    def _say(self, tab: Tab | None, notice: Notice | None, kind: Kind, title: str, body: str) -> None:
+        if notice is not None:
+            self.feedback.update(notice, kind, title, body)
+        else:
+            self.feedback.notify(tab.client if tab is not None else None, kind, title, body)
 
-    # ----- rods -----
+    # ----- rod operations (each can be undone) -----
 
-    def add_extraction(self, extraction: Extraction) -> RodEntry:
-        """Add a rod (its Gaussians leave the scene node for the rod's own)."""
+    def add_extraction(
+        self,
+        extraction: Extraction,
+        rod_id: int | None = None,
+        clamp: Clamp | None = None,
+        pins: Sequence[int] = (),
+        record: bool = True,
+    ) -> RodEntry:
+        """Add a rod (its Gaussians leave the scene's chunks for the rod's own nodes).
+
+        Raises:
+            RodRefused: it repeats a rod, or no Gaussian would follow it.
+        """
         with self.rods.lock:
-            entry = self.rods.add(extraction)
-            with self.server.atomic():
-                self.display.set_scene(self.rods.scene)
-                self.display.show_scene(self.rods.off_scene_node())
-                self.display.add_rod(entry)
-        self._refresh_rod_list(select=entry.id)
+            entry = self.rods.add(extraction, rod_id, clamp, pins)
+            self.display.sync(self.rods)
+            self.contact.rebuild()
+        if record:
+            added = entry
+            self.history.record(
+                Step(
+                    f"rod {added.id}",
+                    undo=lambda: self.remove_rod(added.id, record=False),
+                    redo=lambda: self._put_back(added),
+                )
+            )
+        self._refresh_panel(select=entry.id)
         return entry
 
-    def remove_rod(self, rod_id: int) -> None:
-        with self.rods.lock:
-            self.rods.remove(rod_id)
-            self._grab_offsets.pop(rod_id, None)
-            with self.server.atomic():
-                self.display.set_scene(self.rods.scene)
-                self.display.remove_rod(rod_id)
-                self.display.show_scene(self.rods.off_scene_node())
-        self._refresh_rod_list()
+    def _put_back(self, entry: RodEntry) -> None:
+        self.add_extraction(entry.extraction, entry.id, entry.clamp, sorted(entry.pins), record=False)
 
-    def remove_all(self) -> None:
-        for entry in self.rods.entries:
-            self.remove_rod(entry.id)
+    def remove_rod(self, rod_id: int, record: bool = True, client: Any = None) -> RodEntry:
+        """Remove a rod: its Gaussians go back to the scene at rest."""
+        with self.rods.lock:
+            self._grabs.pop(rod_id, None)
+            entry = self.rods.remove(rod_id)
+            self.display.sync(self.rods)
+            self.contact.rebuild()
+        if record:
+            self.history.record(
+                Step(
+                    f"removal of rod {rod_id}",
+                    undo=lambda: self._put_back(entry),
+                    redo=lambda: self.remove_rod(rod_id, record=False),
+                )
+            )
+            self.feedback.notify(client, "info", f"Rod {rod_id} removed", "Undo (Ctrl+Z) brings it back.")
+        self._refresh_panel()
+        return entry
+
+    def remove_all(self, client: Any = None) -> None:
+        with self.rods.lock:
+            self._grabs.clear()
+            removed = self.rods.clear()
+            self.display.sync(self.rods)
+            self.contact.rebuild()
+        if removed:
+
+            def put_back() -> None:
+                for entry in removed:
+                    self._put_back(entry)
+
+            def remove_again() -> None:
+                for entry in removed:
+                    self.remove_rod(entry.id, record=False)
+
+            self.history.record(Step("removal of every rod", undo=put_back, redo=remove_again))
+            self.feedback.notify(client, "info", f"{len(removed)} rod(s) removed", "Undo (Ctrl+Z) brings them back.")
+        self._refresh_panel()
+
+    def set_material(self, material: Material, record: bool = True) -> None:
+        """New material for every rod; they restart from rest."""
+        with self.rods.lock:
+            before = self.rods.material
+            self._grabs.clear()
+            self.rods.set_material(material)
+        if record:
+
+            def apply(m: Material) -> None:
+                self.set_material(m, record=False)
+                self.panel.show_material(m)
+
+            self.history.record(
+                Step("material change", undo=lambda: apply(before), redo=lambda: apply(material), merge="material")
+            )
+        self._refresh_panel()
+
+    def set_clamp(self, rod_id: int, clamp: Clamp, record: bool = True) -> None:
+        """Hold rod `rod_id` at both ends, one end or none (it restarts from rest)."""
+        with self.rods.lock:
+            before = self.rods.get(rod_id).clamp
+            self._grabs.pop(rod_id, None)
+            self.rods.set_clamp(rod_id, clamp)
+        if record:
+            self.history.record(
+                Step(
+                    f"rod {rod_id} held at {CLAMP_LABELS[clamp]}",
+                    undo=lambda: self.set_clamp(rod_id, before, record=False),
+                    redo=lambda: self.set_clamp(rod_id, clamp, record=False),
+                )
+            )
+        self._refresh_panel()
+
+    def set_pinned(self, rod_id: int, vertex: int, pinned: bool, record: bool = True) -> None:
+        """Pin a vertex where it is, or free it."""
+        with self.rods.lock:
+            if self._grabs and self.rods.grabbed().get(rod_id) == vertex:
+                self._grabs.pop(rod_id, None)
+            self.rods.set_pinned(rod_id, vertex, pinned)
+        if record:
+            what = "pin" if pinned else "release"
+            self.history.record(
+                Step(
+                    f"{what} of point {vertex} of rod {rod_id}",
+                    undo=lambda: self.set_pinned(rod_id, vertex, not pinned, record=False),
+                    redo=lambda: self.set_pinned(rod_id, vertex, pinned, record=False),
+                )
+            )
+
+    def set_contact(self, on: bool, friction: float = 0.0) -> None:
+        """Rods keep out of the scene's solid parts and of each other, or pass through."""
+        self.rods.set_contact(on, friction)
+        self.panel.friction.disabled = not on
+        if bool(self.panel.contact.value) != on:
+            self.panel.contact.value = on  # type: ignore[misc]  # viser's values are settable
 
     def reset(self) -> None:
         """Every rod back to rest."""
         with self.rods.lock:
-            self._grab_offsets.clear()
+            self._grabs.clear()
             self.rods.reset()
-            self._rebuild_display()
 
-    def _rebuild_display(self) -> None:
-        """Every node again, after the rods were rebuilt from the input scene (the rows of split
-        needles may have changed). Hold `rods.lock`."""
-        with self.server.atomic():
-            self.display.set_scene(self.rods.scene)
-            for rod_id in self.display.rod_ids():
-                self.display.remove_rod(rod_id)
-            for entry in self.rods.entries:
-                self.display.add_rod(entry)
-            self.display.show_scene(self.rods.off_scene_node())
-        self.display.push(self.rods)
+    def undo(self, client: Any = None) -> Step | None:
+        """Undo the last rod operation; says what on `client`'s tab (every tab when None)."""
+        return self._step(self.history.undo, "Undone", "Nothing to undo", client)
 
-    def _refresh_rod_list(self, select: int | None = None) -> None:
-        names = tuple(f"rod {e.id}" for e in self.rods.entries) or (NO_ROD,)
-        self.panel.rod.options = names
-        if select is not None:
-            self.panel.rod.value = f"rod {select}"  # type: ignore[misc]  # viser's dropdown value is settable
-        elif self.panel.rod.value not in names:
-            self.panel.rod.value = names[-1]  # type: ignore[misc]
+    def redo(self, client: Any = None) -> Step | None:
+        return self._step(self.history.redo, "Redone", "Nothing to redo", client)
 
-    async def _on_handle_drag(self, rod_id: int, event: Any) -> None:
-        vertex = event.instance_index
-        if self.mode != "Play" or vertex is None:
+    def _step(self, action: Any, done: str, nothing: str, client: Any) -> Step | None:
+        try:
+            step = action()
+        except SketchRodGSError as exc:
+            self.feedback.notify(client, "error", f"Could not {done.lower()[:-1]}", describe_failure(exc))
+            return None
+        finally:
+            self._refresh_panel()
+        if step is None:
+            self.feedback.notify(client, "info", nothing)
+        else:
+            self.feedback.notify(client, "info", f"{done}: {step.label}")
+        return step
+
+    # ----- grabbing and pinning -----
+
+    async def _on_handle_drag(self, rod_id: int, vertex: int, event: Any) -> None:
+        tab = self.tabs.of(event.client)
+        if tab is None or tab.mode != "Play":
             return
         target = np.asarray(event.end_position, np.float64)
         try:
             if event.phase == "start":
                 entry = self.rods.get(rod_id)
-                if entry.rod.boundaries[vertex] != "free":
-                    self._set_status(f"Rod {rod_id}: vertex {vertex} is clamped (untick Clamp ends to move the ends)")
+                kind = entry.rod.boundaries[vertex]
+                if kind != "free":
+                    self.feedback.notify(event.client, "info", *self._held_message(kind))
                     return
                 # keep the grabbed point where the pointer took it, not the vertex under the pointer
                 offset = np.asarray(entry.rod.positions[vertex]) - np.asarray(event.start_position, np.float64)
-                self._grab_offsets[rod_id] = offset
+                self._grabs[rod_id] = offset
                 self.rods.grab(rod_id, vertex, target + offset)
-            elif rod_id in self._grab_offsets:
-                self.rods.move_grab(rod_id, target + self._grab_offsets[rod_id])
+            elif rod_id in self._grabs:
+                self.rods.move_grab(rod_id, target + self._grabs[rod_id])
                 if event.phase == "end":
                     self.rods.release(rod_id)
-                    self._grab_offsets.pop(rod_id, None)
+                    self._grabs.pop(rod_id, None)
         except SketchRodGSError as exc:  # the rod went away mid-drag
-            self._grab_offsets.pop(rod_id, None)
-            self._set_status(f"Rod {rod_id}: {exc}")
+            self._grabs.pop(rod_id, None)
+            self.feedback.notify(event.client, "error", f"Rod {rod_id}", describe_failure(exc))
+
+    @staticmethod
+    def _held_message(kind: str) -> tuple[str, str]:
+        if kind == "clamped":
+            return "This end is held", "Choose another 'Held at' under Rods to move it."
+        return "This point is pinned", "Click it to free it."
+
+    async def _on_handle_click(self, rod_id: int, vertex: int, event: Any) -> None:
+        tab = self.tabs.of(event.client)
+        if tab is None or tab.mode != "Play":
+            return
+        try:
+            kind = self.rods.get(rod_id).rod.boundaries[vertex]
+            if kind == "clamped":
+                self.feedback.notify(event.client, "info", *self._held_message(kind))
+                return
+            self.set_pinned(rod_id, vertex, kind == "free")
+        except SketchRodGSError as exc:
+            self.feedback.notify(event.client, "error", f"Rod {rod_id}", describe_failure(exc))
+            return
+        if kind == "free":
+            self.feedback.notify(
+                event.client, "info", "Pinned", "That point stays where it is; click it again to free it."
+            )
+        else:
+            self.feedback.notify(event.client, "info", "Freed", "That point moves again.")
+
+    # ----- camera -----
+
+    def frame_rod(self, client: Any, rod_id: int | None = None) -> None:
+        """Turn `client`'s view to show the rod (the selected one when None) whole."""
+        tab = self.tabs.of(client)
+        entry = self.selected_rod() if rod_id is None else self.rods.get(rod_id)
+        if entry is None:
+            self.feedback.notify(client, "info", "No rod to frame", "Sketch over a slender part to make one.")
+            return
+        camera = tab.camera() if tab is not None else None
+        if camera is None:
+            return
+        view = framing_view(np.asarray(entry.rod.positions), entry.extraction.radius, camera, self.up)
+        self._look(client, view)
+
+    def show_view(self, name: str, client: Any) -> None:
+        """Show `client` the view the page opened with ("Start"), or the scene from the "Front",
+        "Side" or "Top"."""
+        if name not in CAMERA_VIEWS:
+            raise SketchRodGSError(f"view: expected one of {', '.join(CAMERA_VIEWS)}, got {name!r}")
+        if name == "Start":
+            self._look(client, self._start_view)
+            return
+        tab = self.tabs.of(client)
+        camera = tab.camera() if tab is not None else None
+        if camera is None:
+            return
+        framed = frame_scene(
+            self.scene,
+            self.up,
+            PRESET_ORBITS[name],
+            width=camera.width,
+            height=camera.height,
+            fov_y_deg=camera.fov_y_deg,
+        )
+        # it looks at the middle of the scene without its floaters: orbit about a point on that line
+        forward = framed.camera_to_world[:3, 2]
+        distance = float(np.dot(self._centre - framed.center, forward))
+        self._look(client, viser_view(framed, distance if distance > 0 else self._extent))
+
+    def _look(self, client: Any, view: ViserView) -> None:
+        if client is None:
+            return
+        with client.atomic():
+            client.camera.fov = view.fov_y
+            client.camera.up_direction = view.up
+            client.camera.look_at = view.look_at
+            client.camera.position = view.position
+
+    def _set_initial_camera(self, camera: Camera | None) -> ViserView:
+        if camera is not None:
+            forward = camera.camera_to_world[:3, 2]
+            distance = float(np.dot(self._centre - camera.center, forward))
+            view = viser_view(camera, distance if distance > 0 else max(self._extent / 2, 1e-3))
+            self.server.initial_camera.fov = view.fov_y
+        else:
+            # look across the scene along an axis perpendicular to up, from 1.2 extents away
+            axis = np.array([0.0, 0.0, 1.0]) if abs(self.up[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+            eye = self._centre - 1.2 * max(self._extent, 1e-3) * axis
+            view = viser_view(Camera.look_at(eye, self._centre, up=self.up), float(1.2 * max(self._extent, 1e-3)))
+            view = dataclasses.replace(view, fov_y=float(self.server.initial_camera.fov))
+        self.server.initial_camera.position = view.position
+        self.server.initial_camera.look_at = view.look_at
+        self.server.initial_camera.up = view.up
+        return view
 
     # ----- exports -----
 
@@ -352,7 +594,8 @@ class ViewerApp:
         return target
 
     def save_rods(self, directory: str | Path | None = None) -> list[Path]:
-        """Write each rod as rod JSON (`rod_<id>.json`, with its material); returns the paths."""
+        """Write each rod as rod JSON (`rod_<id>.json` and its bindings, with its material);
+        returns the JSON paths."""
         folder = Path(directory) if directory is not None else self.output_dir
         folder.mkdir(parents=True, exist_ok=True)
         paths = []
@@ -380,87 +623,149 @@ class ViewerApp:
         save_png(target, np.ascontiguousarray(image[..., :3]))
         return target
 
+    def _download(self, client: Any, what: str, make: Any) -> None:
+        """Write an export with `make() -> (file name, bytes, where written)` and send it to
+        `client`'s browser as a download."""
+        notice = self.feedback.notify(client, "busy", f"Preparing {what}…")
+        try:
+            name, data, written = make()
+        except (SketchRodGSError, OSError, TimeoutError, RuntimeError) as exc:
+            self.feedback.update(notice, "error", f"No {what}", describe_failure(exc))
+            return
+        if client is not None:
+            client.send_file_download(name, data, save_immediately=True)
+        self.feedback.update(notice, "done", f"{name} downloaded ({_size(len(data))})", f"Also written to {written}.")
+
+    def _ply_download(self) -> tuple[str, bytes, str]:
+        path = self.export_ply()
+        return path.name, path.read_bytes(), str(path)
+
+    def _rods_download(self) -> tuple[str, bytes, str]:
+        paths = self.save_rods()
+        if not paths:
+            raise SketchRodGSError("there are no rods to save yet")
+        buffer = io.BytesIO()
+        with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+            for path in paths:
+                for part in sorted(path.parent.glob(path.stem + ".*")):
+                    archive.write(part, part.name)
+        return "rods.zip", buffer.getvalue(), str(self.output_dir)
+
+    def _screenshot_download(self, client: Any) -> tuple[str, bytes, str]:
+        path = self.screenshot(client)
+        return path.name, path.read_bytes(), str(path)
+
     # ----- panel -----
+
+    def selected_rod(self) -> RodEntry | None:
+        value = str(self.panel.rod.value)
+        if value == NO_ROD:
+            return None
+        try:
+            return self.rods.get(int(value.removeprefix("rod ")))
+        except (SketchRodGSError, ValueError):
+            return None
 
     def _wire_panel(self) -> None:
         panel = self.panel
 
-        @panel.mode.on_click
-        async def _(event: Any) -> None:
-            self.set_mode(event.target.value)
-
         @panel.auto_radius.on_update
-        async def _(event: Any) -> None:
+        def _(event: Any) -> None:
             panel.radius.disabled = bool(panel.auto_radius.value)
 
         def material_changed(event: Any) -> None:
-            with self.rods.lock:
-                self._grab_offsets.clear()
-                self.rods.set_params(panel.rod_params(-self.up))
-                self._rebuild_display()
-            self._set_status("Material changed: the rods restarted from rest.")
+            if event.client is None:  # set by the app (an undo), not by the user
+                return
+            density = self.rods.material.density
+            self.set_material(panel.material(-self.up, density))
+            self.feedback.notify(event.client, "info", "Material changed", "The rods restarted from rest.")
 
         for widget in panel.material_inputs():
             widget.on_update(material_changed)
 
-        @panel.clamp_ends.on_update
-        def _(event: Any) -> None:
-            self.rods.set_clamp_ends(bool(panel.clamp_ends.value))
+        def contact_changed(event: Any) -> None:
+            self.set_contact(bool(panel.contact.value), float(panel.friction.value))
 
-        @panel.remove_rod.on_click
-        def _(event: Any) -> None:
-            value = str(panel.rod.value)
-            if value != NO_ROD:
-                self.remove_rod(int(value.removeprefix("rod ")))
+        panel.contact.on_update(contact_changed)
+        panel.friction.on_update(contact_changed)
+        panel.rod.on_update(lambda event: self._refresh_panel())
 
+        @panel.clamp.on_update
+        def _(event: Any) -> None:
+            entry = self.selected_rod()
+            if event.client is None or entry is None:
+                return
+            clamp = clamp_of(str(panel.clamp.value))
+            if clamp != entry.clamp:
+                self.set_clamp(entry.id, clamp)
+
+        panel.frame.on_click(lambda event: self.frame_rod(event.client))
+        panel.remove_rod.on_click(lambda event: self.act("Remove", event.client))
         panel.reset.on_click(lambda event: self.reset())
-        panel.remove_all.on_click(lambda event: self.remove_all())
+        panel.remove_all.on_click(lambda event: self.remove_all(event.client))
 
-        def exporting(what: str, action: Any) -> Any:
-            def run(event: Any) -> None:
-                try:
-                    result = action(event)
-                except (SketchRodGSError, OSError, TimeoutError, RuntimeError) as exc:
-                    self._set_status(f"{what} failed: {exc}")
-                    return
-                self._set_status(f"{what}: {result}")
+        @panel.undo.on_click
+        def _(event: Any) -> None:
+            self.undo(event.client)
 
-            return run
+        @panel.redo.on_click
+        def _(event: Any) -> None:
+            self.redo(event.client)
 
-        panel.export_ply.on_click(exporting("Deformed scene written", lambda e: self.export_ply()))
-        panel.save_rods.on_click(
-            exporting("Rods written", lambda e: ", ".join(str(p) for p in self.save_rods()) or "no rods to save")
+        panel.camera.on_click(lambda event: self.show_view(str(event.target.value), event.client))
+        panel.export_ply.on_click(lambda event: self._download(event.client, "the deformed scene", self._ply_download))
+        panel.save_rods.on_click(lambda event: self._download(event.client, "the rods", self._rods_download))
+        panel.screenshot.on_click(
+            lambda event: self._download(event.client, "a screenshot", lambda: self._screenshot_download(event.client))
         )
-        panel.screenshot.on_click(exporting("Screenshot written", lambda e: self.screenshot(e.client)))
+        for shortcut, command in panel.commands:
+            command.on_trigger(self._trigger(shortcut.action))
 
-    def _set_status(self, text: str) -> None:
-        with self._status_lock:
-            self.panel.status.content = text
+    def _trigger(self, action: str) -> Any:
+        return lambda event: self.act(action, event.client)
+
+    def _refresh_panel(self, select: int | None = None) -> None:
+        """Make the panel show the rods, the selected rod and what can be done now."""
+        panel = self.panel
+        with self._panel_lock:
+            entries = self.rods.entries
+            names = tuple(f"rod {e.id}" for e in entries) or (NO_ROD,)
+            panel.rod.options = names
+            if select is not None:
+                panel.rod.value = f"rod {select}"  # type: ignore[misc]  # viser's dropdown value is settable
+            elif panel.rod.value not in names:
+                panel.rod.value = names[-1]  # type: ignore[misc]
+            entry = self.selected_rod()
+            if entry is None:
+                panel.rod_info.content = "Sketch (2) over a slender part to make a rod."
+            else:
+                params = entry.rod.params
+                panel.rod_info.content = (
+                    f"{entry.rod.num_vertices} points, {len(entry.gaussian_ids):,} Gaussians, "
+                    f"R = {entry.extraction.radius:.3g}, E = {params.youngs_modulus:.3g} Pa"
+                )
+                panel.clamp.value = CLAMP_LABELS[entry.clamp]  # type: ignore[misc]
+            for widget in (panel.rod, panel.clamp, panel.frame, panel.remove_rod, panel.reset, panel.remove_all):
+                widget.disabled = entry is None
+            panel.save_rods.disabled = not entries
+            panel.undo.disabled = not self.history.can_undo
+            panel.redo.disabled = not self.history.can_redo
 
     def _frame_done(self, timings: dict[str, float]) -> None:
         now = time.perf_counter()
-        if now - self._last_timing_update < STATUS_INTERVAL:
+        if now - self._last_timings < TIMINGS_INTERVAL:
             return
-        self._last_timing_update = now
+        self._last_timings = now
         bound = int(sum(len(e.gaussian_ids) for e in self.rods.entries))
         self.panel.timings.content = (
             f"**Frame** ({bound:,} rod Gaussians, {self.splat_update}, mean of the last "
             f"{min(self.loop.timings.count, 60)}): {self.loop.timings.summary()}"
         )
 
-    # ----- camera -----
 
-    def _set_initial_camera(self, camera: Camera | None) -> None:
-        if camera is not None:
-            forward = camera.camera_to_world[:3, 2]
-            distance = float(np.dot(self._centre - camera.center, forward))
-            view = viser_view(camera, distance if distance > 0 else max(self._extent / 2, 1e-3))
-            self.server.initial_camera.fov = view.fov_y
-        else:
-            # look across the scene along an axis perpendicular to up, from 1.2 extents away
-            axis = np.array([0.0, 0.0, 1.0]) if abs(self.up[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-            eye = self._centre - 1.2 * max(self._extent, 1e-3) * axis
-            view = viser_view(Camera.look_at(eye, self._centre, up=self.up), float(1.2 * max(self._extent, 1e-3)))
-        self.server.initial_camera.position = view.position
-        self.server.initial_camera.look_at = view.look_at
-        self.server.initial_camera.up = view.up
+def _size(count: int) -> str:
+    """A byte count for people."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= scale:
+            return f"{count / scale:.1f} {unit}"
+    return f"{count} bytes"

@@ -121,3 +121,23 @@ def unproject(pixels: np.ndarray, camera: Camera, depth: float) -> np.ndarray:
     local = np.stack([(px[:, 0] - camera.cx) / camera.fx, (px[:, 1] - camera.cy) / camera.fy, np.ones(len(px))], axis=1)
     c2w = camera.camera_to_world
     return (depth * local) @ c2w[:3, :3].T + c2w[:3, 3]
+
+
+FRAME_MARGIN = 1.4  # the framed sphere's radius, times this, fills the narrower field of view
+
+
+def framing_view(points: np.ndarray, radius: float, camera: Camera, up: Sequence[float] | np.ndarray) -> ViserView:
+    """The view that shows `points` (and `radius` around them) whole from `camera`'s direction."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    centre = (p.min(axis=0) + p.max(axis=0)) / 2
+    sphere = float(np.linalg.norm(p - centre, axis=1).max()) + radius
+    forward = camera.camera_to_world[:3, 2]
+    half = min(math.atan(camera.height / (2 * camera.fy)), math.atan(camera.width / (2 * camera.fx)))
+    distance = FRAME_MARGIN * max(sphere, 1e-9) / math.sin(half)
+    position = centre - distance * forward
+    return ViserView(
+        tuple(position.tolist()),
+        tuple(centre.tolist()),
+        (float(up[0]), float(up[1]), float(up[2])),
+        2 * math.atan(camera.height / (2 * camera.fy)),
+    )

@@ -1,5 +1,14 @@
-"""What the browser shows: the scene's splats, and per rod its splats, polyline, handles and
-segmented Gaussians; the stroke being drawn.
+"""What every browser is sent: the scene drawn at rest, and per rod its splats, polyline, handles
+and bound-Gaussian dots.
+
+The scene node tree (each tab shows or hides the `/overlay`, `/overlay/bound` and `/play`
+branches for itself, see `tabs.py`):
+
+    /scene/<chunk>                  the Gaussians of no rod, in spatial chunks (`scene_chunks.py`)
+    /rods/<id>/...                  a rod's Gaussians (below)
+    /overlay/rod_<id>/polyline      the rod's axis (Sketch and Play)
+    /overlay/bound/rod_<id>         dots on its Gaussians, the tint showing what is bound
+    /play/rod_<id>/handles          a ball per grabbable vertex (Play)
 
 viser merges every splat node into one buffer on the client and rebuilds it whenever any node's
 Gaussians change, so per-frame updates of a rod's Gaussians cost the browser work in proportion to
@@ -13,13 +22,11 @@ the whole scene. Two ways to move a rod's Gaussians each frame:
   polyline; no re-merge). Gaussians follow their segment rigidly instead of the blend of its two
   vertex frames, a small difference at the joints of a strongly bent rod.
 
-benches/bench_viewer.py measures both. The scene node holds the Gaussians of no rod; it is rebuilt
-when a rod is added or removed.
+benches/bench_viewer.py measures both.
 """
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,23 +35,31 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
-from ..images import POLYLINE_COLOUR, SEGMENT_COLOUR, STROKE_COLOUR
+from ..camera import Camera
+from ..images import POLYLINE_COLOUR, SEGMENT_COLOUR
 from ..scene import GaussianScene
 from ..skin import matrices_to_quats
 from .rods import RodEntry, RodSet
+from .scene_chunks import SceneChunks
 from .splats import SplatArrays, SplatPacker, covariance_triu, splat_unit
 
 SplatUpdate = Literal["exact", "segments"]
 SPLAT_UPDATES = ("exact", "segments")
-HANDLE_SCALE = 1.15  # handle radius in rod radii: poking out of the tube (the splats hide what is inside)
-HANDLE_OPACITY = 0.45  # see-through, so the tube stays visible under its handles
+# Handles are thin: a ball of half the rod's radius lets the rod's Gaussians show around it, kept
+# between HANDLE_PIXELS (to be grabbed) in the view of the last tab that entered Play or moved there.
+HANDLE_RADII = 0.5
+HANDLE_PIXELS = (4.0, 9.0)
+HANDLE_GAP = 3.0  # handle radii between the balls shown (a vertex closer to the last one has none)
+HANDLE_OPACITY = 0.8
 HANDLE_COLOUR = (90, 200, 255)
 CLAMPED_COLOUR = (150, 150, 150)
+PINNED_COLOUR = (170, 90, 230)
 GRABBED_COLOUR = (255, 140, 0)
-FAILED_STROKE_COLOUR = (230, 40, 40)
+MAX_DOTS = 1500  # bound-Gaussian dots per rod (a tint, not a census: 9 bytes a dot a moving frame)
+DOT_RADII = 0.2  # dot size in rod radii
 
 POSE_TOLERANCE = 1e-7  # relative to the rod's length (and radians): smaller pose changes are not sent
-HandleDrag = Callable[[int, Any], Any]  # (rod id, viser drag event) -> None or a coroutine
+HandleEvent = Callable[[int, int, Any], Any]  # (rod id, vertex, viser event) -> None or a coroutine
 
 
 def _icosphere() -> tuple[np.ndarray, np.ndarray]:
@@ -60,78 +75,112 @@ def polyline_segments(points: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.stack([p[:-1], p[1:]], axis=1))
 
 
+def handle_radii(rest: np.ndarray, radius: float, camera: Camera | None) -> tuple[np.ndarray, np.ndarray]:
+    """Which vertices of a rod get a handle, and how large: ((H,) vertices, (H,) float32 radii).
+
+    `HANDLE_RADII` R, kept within `HANDLE_PIXELS` in `camera`'s view; a vertex closer than
+    `HANDLE_GAP` radii to the last one with a handle has none, except the ends (which show how the
+    rod is held), so that the balls do not hide the rod."""
+    rest = np.asarray(rest, np.float64)
+    radii = np.full(len(rest), HANDLE_RADII * radius)
+    if camera is not None:
+        depth = np.maximum(camera.project(rest)[1], 1e-9)
+        pixel = depth / camera.fy  # world size of one pixel at each vertex
+        radii = np.clip(radii, HANDLE_PIXELS[0] * pixel, HANDLE_PIXELS[1] * pixel)
+    shown = [0]
+    for v in range(1, len(rest)):
+        if np.linalg.norm(rest[v] - rest[shown[-1]]) >= HANDLE_GAP * max(radii[v], radii[shown[-1]]):
+            shown.append(v)
+        elif v == len(rest) - 1 and len(shown) > 1:
+            shown[-1] = v  # the end keeps its handle; the interior vertex crowding it gives it up
+        elif v == len(rest) - 1:
+            shown.append(v)
+    vertices = np.array(shown, np.int64)
+    return vertices, radii[vertices].astype(np.float32)
+
+
 @dataclass
 class RodNodes:
     """The scene nodes of one rod."""
 
     splats: list[Any]
     segments: list[int]  # for "segments": the rod segment of each splat node
-    part: SplatArrays  # the rod's Gaussians at rest
     packer: SplatPacker
     sent_poses: np.ndarray  # for "segments": (S, 7) wxyz + position last sent per node
     polyline: Any
     handles: Any
-    segmented: Any
+    dots: Any
+    dot_rows: np.ndarray  # rows of the rod's binding the dots sit on
+    dot_centre: np.ndarray  # (3,) the dots node's position (the dots are sent relative to it)
+    handle_vertices: np.ndarray  # the vertex of each handle
+    handle_radii: np.ndarray
     colours: np.ndarray = field(default_factory=lambda: np.empty((0, 3), np.uint8))
+    dots_stale: bool = False
 
 
 class SceneDisplay:
-    """The scene nodes of a viewer session.
+    """The scene nodes of a viewer session (shared by every browser).
 
     Args:
         server: the viser server.
         scene: the scene at rest.
         update: how rods' Gaussians move each frame ("exact" or "segments", see the module).
-        on_handle_drag: called with (rod id, event) when a rod's handle is dragged.
+        on_handle_drag: called with (rod id, vertex, event) when a rod's handle is dragged.
+        on_handle_click: called with (rod id, vertex, event) when a rod's handle is clicked.
     """
 
     def __init__(
-        self, server: viser.ViserServer, scene: GaussianScene, update: SplatUpdate, on_handle_drag: HandleDrag
+        self,
+        server: viser.ViserServer,
+        scene: GaussianScene,
+        update: SplatUpdate,
+        on_handle_drag: HandleEvent,
+        on_handle_click: HandleEvent | None = None,
     ) -> None:
         if update not in SPLAT_UPDATES:
             raise ValueError(f"splat update: expected one of {SPLAT_UPDATES}, got {update!r}")
         self.server = server
         self.splats = SplatArrays.from_scene(scene)
-        self._scene = scene
         self.unit = splat_unit(scene.scales)  # every splat node has this scale (see splats.py)
         self.update = update
+        self.chunks = SceneChunks(server, self.unit)
         self._on_handle_drag = on_handle_drag
-        self._scene_node: Any = None
+        self._on_handle_click = on_handle_click
         self._rods: dict[int, RodNodes] = {}
-        self._stroke: Any = None
-        self._stroke_failed = False
-        self._stroke_lock = threading.Lock()  # the event loop draws it, the extraction worker recolours it
         self._sphere = _icosphere()
-        self.show_handles = False
-        self.show_segmented = False
+        self._handle_camera: Camera | None = None
+        self.dots_wanted = True  # some tab shows the dots: keep them moving with the rods
+        self.sent_gaussians = 0  # Gaussians sent by the last `sync` (chunks and new rods)
 
-    # ----- the scene -----
+    # ----- the scene and its rods -----
 
-    def set_scene(self, scene: GaussianScene) -> None:
-        """The scene the nodes are made from, when rods change it (split needles are appended)."""
-        if scene is not self._scene:
-            self.splats = SplatArrays.from_scene(scene)
-            self._scene = scene
+    def sync(self, rods: RodSet) -> int:
+        """Make the nodes match `rods` (call with `rods.lock` held, after adding or removing rods):
+        the chunks whose rows changed, and the nodes of rods added or removed. Returns the number
+        of Gaussians sent."""
+        with self.server.atomic():
+            self.splats = self.splats.updated(rods.scene, changed := rods.take_changed_rows())
+            sent = self.chunks.update(self.splats, rods.static_rows(), changed)
+            current = {entry.id: entry for entry in rods.entries}
+            for rod_id in [r for r in self._rods if r not in current]:
+                self._remove_rod(rod_id)
+            for rod_id, entry in current.items():
+                if rod_id not in self._rods:
+                    self._add_rod(entry)
+                    sent += len(entry.gaussian_ids)
+        self.sent_gaussians = sent
+        return sent
 
-    def show_scene(self, owned: np.ndarray) -> float:
-        """(Re)send the scene node without the Gaussians in `owned`; returns seconds spent."""
-        clock = time.perf_counter()
-        keep = np.ones(len(self.splats), bool)
-        keep[owned] = False
-        part = (self.splats if keep.all() else self.splats.subset(np.flatnonzero(keep))).in_unit(self.unit)
-        self._scene_node = self.server.scene.add_gaussian_splats(
-            "/scene", part.centers, part.covariances, part.rgbs, part.opacities, scale=self.unit
-        )
-        return time.perf_counter() - clock
+    def rod_ids(self) -> list[int]:
+        return list(self._rods)
 
-    # ----- rods -----
-
-    def add_rod(self, entry: RodEntry) -> None:
+    def _add_rod(self, entry: RodEntry) -> None:
         """Create the nodes of a rod (at rest)."""
         ids = entry.gaussian_ids
         splats, segments = [], []
         base = f"/rods/{entry.id}"
         part = self.splats.subset(ids)
+        rest = np.asarray(entry.rod.rest_positions, np.float64)
         if self.update == "exact":
             local = part.in_unit(self.unit)
             splats.append(
@@ -140,7 +189,6 @@ class SceneDisplay:
                 )
             )
         else:
-            rest = np.asarray(entry.rod.rest_positions, np.float64)
             for j in np.unique(entry.bound.segment):
                 # each node holds its Gaussians relative to the segment's first vertex at rest
                 piece = part.subset(np.flatnonzero(entry.bound.segment == j)).in_unit(self.unit, rest[j])
@@ -158,63 +206,96 @@ class SceneDisplay:
                 segments.append(int(j))
         positions = np.asarray(entry.rod.positions, np.float32)
         polyline = self.server.scene.add_line_segments(
-            f"{base}/polyline", polyline_segments(positions), POLYLINE_COLOUR, thickness=3.0, thickness_units="screen"
+            f"/overlay/rod_{entry.id}/polyline",
+            polyline_segments(positions),
+            POLYLINE_COLOUR,
+            thickness=2.0,
+            thickness_units="screen",
         )
-        count = len(positions)
+        dot_rows = np.arange(len(ids))[:: max(1, -(-len(ids) // MAX_DOTS))]
+        centre = rest.mean(axis=0)
+        dots = self.server.scene.add_point_cloud(
+            f"/overlay/bound/rod_{entry.id}",
+            (part.centers[dot_rows] - centre).astype(np.float16),
+            SEGMENT_COLOUR,
+            point_size=max(DOT_RADII * entry.extraction.radius, 1e-6),
+            point_shape="circle",
+            position=centre,
+        )
+        vertices, radii = handle_radii(rest, entry.extraction.radius, self._handle_camera)
         colours = self._handle_colours(entry, None)
-        vertices, faces = self._sphere
+        handles = self._add_handles(entry.id, positions, vertices, radii, colours)
+        poses = np.zeros((len(segments), 7))
+        poses[:, 0] = 1.0
+        poses[:, 4:] = rest[segments]
+        packer = SplatPacker(part.rgbs, part.opacities)
+        self._rods[entry.id] = RodNodes(
+            splats, segments, packer, poses, polyline, handles, dots, dot_rows, centre, vertices, radii, colours
+        )
+
+    def _add_handles(
+        self, rod_id: int, positions: np.ndarray, vertices: np.ndarray, radii: np.ndarray, colours: np.ndarray
+    ) -> Any:
+        mesh_vertices, faces = self._sphere
         handles = self.server.scene.add_batched_meshes_simple(
-            f"{base}/handles",
-            vertices,
+            f"/play/rod_{rod_id}/handles",
+            mesh_vertices,
             faces,
-            batched_wxyzs=np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (count, 1)),
-            batched_positions=positions,
-            batched_scales=np.full(count, HANDLE_SCALE * entry.extraction.radius, np.float32),
-            batched_colors=colours,
-            batched_opacities=self._handle_opacities(colours),
+            batched_wxyzs=np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (len(vertices), 1)),
+            batched_positions=positions[vertices],
+            batched_scales=radii,
+            batched_colors=colours[vertices],
+            batched_opacities=np.full(len(vertices), HANDLE_OPACITY, np.float32),
             opacity=1.0,
             cast_shadow=False,
             receive_shadow=False,
-            visible=self.show_handles,
-        )
-        rod_id = entry.id
-
-        async def dragged(event: Any) -> None:
-            result = self._on_handle_drag(rod_id, event)
-            if hasattr(result, "__await__"):
-                await result
-
-        handles.on_drag("left")(dragged)
-        segmented = self.server.scene.add_point_cloud(
-            f"{base}/segmented",
-            self.splats.centers[ids],
-            SEGMENT_COLOUR,
-            point_size=max(entry.extraction.radius * 0.15, 1e-6),
-            point_shape="circle",
-            visible=self.show_segmented,
-        )
-        poses = np.zeros((len(segments), 7))
-        poses[:, 0] = 1.0
-        poses[:, 4:] = np.asarray(entry.rod.rest_positions, np.float64)[segments]
-        self._rods[entry.id] = RodNodes(
-            splats, segments, part, SplatPacker(part.rgbs, part.opacities), poses, polyline, handles, segmented, colours
         )
 
-    def remove_rod(self, rod_id: int) -> None:
-        nodes = self._rods.pop(rod_id, None)
-        if nodes is None:
-            return
-        for node in [*nodes.splats, nodes.polyline, nodes.handles, nodes.segmented]:
+        def forward(callback: HandleEvent) -> Callable[[Any], Any]:
+            async def call(event: Any) -> None:
+                if event.instance_index is None:
+                    return
+                result = callback(rod_id, int(vertices[event.instance_index]), event)
+                if hasattr(result, "__await__"):
+                    await result
+
+            return call
+
+        handles.on_drag("left")(forward(self._on_handle_drag))
+        if self._on_handle_click is not None:
+            handles.on_click(forward(self._on_handle_click))
+        return handles
+
+    def _remove_rod(self, rod_id: int) -> None:
+        nodes = self._rods.pop(rod_id)
+        for node in [*nodes.splats, nodes.polyline, nodes.dots, nodes.handles]:
             node.remove()
 
-    def rod_ids(self) -> list[int]:
-        return list(self._rods)
+    # ----- handles -----
 
-    def set_visibility(self, handles: bool, segmented: bool) -> None:
-        self.show_handles, self.show_segmented = handles, segmented
-        for nodes in list(self._rods.values()):  # a rod may be added meanwhile (extraction worker)
-            nodes.handles.visible = handles
-            nodes.segmented.visible = segmented
+    def size_handles(self, rods: RodSet, camera: Camera) -> None:
+        """Size the handles for `camera`'s view (see `handle_radii`; call with `rods.lock` held)."""
+        self._handle_camera = camera
+        for entry in rods.entries:
+            nodes = self._rods.get(entry.id)
+            if nodes is None:
+                continue
+            vertices, radii = handle_radii(entry.rod.rest_positions, entry.extraction.radius, camera)
+            if np.array_equal(vertices, nodes.handle_vertices):
+                if not np.allclose(radii, nodes.handle_radii, rtol=0.05, atol=0.0):
+                    nodes.handles.batched_scales = radii
+                    nodes.handle_radii = radii
+                continue
+            nodes.handles.remove()  # another number of balls: a new node
+            positions = np.asarray(entry.rod.positions, np.float32)
+            nodes.handles = self._add_handles(entry.id, positions, vertices, radii, nodes.colours)
+            nodes.handle_vertices, nodes.handle_radii = vertices, radii
+
+    def shown_handles(self, rod_id: int) -> np.ndarray:
+        """Vertices of rod `rod_id` that have a handle now."""
+        return self._rods[rod_id].handle_vertices.copy()
+
+    # ----- each frame -----
 
     def push(self, rods: RodSet) -> dict[str, float]:
         """Send every rod's current state (call with `rods.lock` held); returns seconds spent."""
@@ -226,6 +307,7 @@ class SceneDisplay:
                 if nodes is None:
                     continue
                 positions = np.asarray(entry.rod.positions, np.float32)
+                rotations = entry.edge_rotations()
                 if self.update == "exact":
                     ids = entry.gaussian_ids
                     unit = np.float32(self.unit)
@@ -233,64 +315,59 @@ class SceneDisplay:
                         rods.means[ids] / unit, covariance_triu(rods.scales[ids] / unit, rods.quats[ids])
                     )
                 else:
-                    poses = np.concatenate(
-                        [matrices_to_quats(entry.edge_rotations()), np.asarray(entry.rod.positions, np.float64)[:-1]],
-                        axis=1,
-                    )[nodes.segments]
+                    poses = np.concatenate([matrices_to_quats(rotations), positions[:-1].astype(np.float64)], axis=1)[
+                        nodes.segments
+                    ]
                     # setting a pose costs tens of microseconds in viser: send only the ones that moved
                     moved = np.abs(poses - nodes.sent_poses).max(axis=1) > POSE_TOLERANCE * max(entry.length, 1e-12)
                     for k in np.flatnonzero(moved):
                         nodes.splats[k].wxyz = poses[k, :4]
                         nodes.splats[k].position = poses[k, 4:]
                     nodes.sent_poses[moved] = poses[moved]
+                nodes.dots_stale = True
+                if self.dots_wanted:
+                    self._move_dots(entry, nodes, rods, rotations, positions)
                 nodes.polyline.points = polyline_segments(positions)
-                nodes.handles.batched_positions = positions
+                nodes.handles.batched_positions = positions[nodes.handle_vertices]
                 colours = self._handle_colours(entry, grabbed.get(entry.id))
                 if not np.array_equal(colours, nodes.colours):
-                    nodes.handles.batched_colors = colours
-                    nodes.handles.batched_opacities = self._handle_opacities(colours)
+                    nodes.handles.batched_colors = colours[nodes.handle_vertices]
                     nodes.colours = colours
         return {"push": time.perf_counter() - clock}
 
-    @staticmethod
-    def _handle_opacities(colours: np.ndarray) -> np.ndarray:
-        grabbed = (colours == np.array(GRABBED_COLOUR, np.uint8)).all(axis=1)
-        return np.where(grabbed, 0.9, HANDLE_OPACITY).astype(np.float32)
+    def show_dots(self, rods: RodSet, wanted: bool) -> None:
+        """Keep the dots moving with the rods or not (when no tab shows them); brings them up to
+        date when they are wanted again."""
+        self.dots_wanted = wanted
+        if not wanted:
+            return
+        with rods.lock, self.server.atomic():
+            for entry in rods.entries:
+                nodes = self._rods.get(entry.id)
+                if nodes is not None and nodes.dots_stale:
+                    positions = np.asarray(entry.rod.positions, np.float32)
+                    self._move_dots(entry, nodes, rods, entry.edge_rotations(), positions)
+
+    def _move_dots(
+        self, entry: RodEntry, nodes: RodNodes, rods: RodSet, rotations: np.ndarray, positions: np.ndarray
+    ) -> None:
+        rows = nodes.dot_rows
+        if self.update == "exact":
+            means, _, _ = rods.skinned()
+            world = means[entry.gaussian_ids[rows]].astype(np.float64)
+        else:  # rigidly with their segment, as the splat nodes move
+            segment = entry.bound.segment[rows]
+            rest = np.asarray(entry.rod.rest_positions, np.float64)
+            local = rods.scene.means[entry.gaussian_ids[rows]].astype(np.float64) - rest[segment]
+            world = np.einsum("kij,kj->ki", rotations[segment], local) + positions[segment]
+        nodes.dots.points = (world - nodes.dot_centre).astype(np.float16)
+        nodes.dots_stale = False
 
     @staticmethod
     def _handle_colours(entry: RodEntry, grabbed: int | None) -> np.ndarray:
         kinds = entry.rod.boundaries
-        colours = np.array([CLAMPED_COLOUR if k != "free" else HANDLE_COLOUR for k in kinds], np.uint8)
+        palette = {"free": HANDLE_COLOUR, "clamped": CLAMPED_COLOUR, "pinned": PINNED_COLOUR}
+        colours = np.array([palette.get(k, HANDLE_COLOUR) for k in kinds], np.uint8)
         if grabbed is not None:
             colours[grabbed] = GRABBED_COLOUR
         return colours
-
-    # ----- the stroke -----
-
-    def show_stroke(self, points: np.ndarray, failed: bool = False) -> None:
-        """Draw the stroke through (S, 3) world points (placed in front of what the camera looks at)."""
-        if len(points) < 2:
-            return
-        segments = polyline_segments(points)
-        with self._stroke_lock:
-            if self._stroke is None or failed != self._stroke_failed:
-                # a new node for a new colour: assigning per-vertex colours to a line node greys it
-                # out in viser 1.1, so the colour is only ever given at creation
-                if self._stroke is not None:
-                    self._stroke.remove()
-                self._stroke = self.server.scene.add_line_segments(
-                    "/sketch/stroke",
-                    segments,
-                    FAILED_STROKE_COLOUR if failed else STROKE_COLOUR,
-                    thickness=3.0,
-                    thickness_units="screen",
-                )
-                self._stroke_failed = failed
-            else:
-                self._stroke.points = segments
-
-    def clear_stroke(self) -> None:
-        with self._stroke_lock:
-            if self._stroke is not None:
-                self._stroke.remove()
-                self._stroke = None

@@ -15,17 +15,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact import SceneField
 from ..errors import SketchRodGSError
 from ..extract import Extraction
 from ..rig import Rig, clamped_end_weights
-from ..rod import Rod, RodParams, World
+from ..rod import ContactSettings, Rod, SimulationError, World
 from ..scene import GaussianScene
 from ..skin import BoundRod, skin_into
+from .material import CLAMPS, Clamp, Material
 
 # A rod sleeps (is no longer stepped or sent) once no vertex moved more than this fraction of
 # its length per frame for SLEEP_FRAMES frames in a row, with nothing grabbed.
 SLEEP_TOLERANCE = 1e-6
 SLEEP_FRAMES = 10
+# A new rod most of whose Gaussians follow one rod already is that rod again (the same stroke twice).
+REPEAT_SHARE = 0.5
+
+
+class RodRefused(SketchRodGSError):
+    """The set will not add this rod: it would bind no Gaussians, or it repeats a rod it has."""
 
 
 @dataclass
@@ -33,12 +41,14 @@ class RodEntry:
     """One rod of the session.
 
     Attributes:
-        id: stable identifier (never reused in a session), names its scene nodes.
+        id: stable identifier (a removed rod's is only reused when it is put back), names its nodes.
         extraction: what it was built from; its binding holds only the Gaussians this rod owns.
         rod: the simulated rod (in the set's world).
         bound: its Gaussians, bound at rest.
         rest_edge_frames: (M-1, 3, 3) edge material frames at rest.
         length: rest length of the polyline.
+        clamp: which ends are held: "both", "start", "end" or "none".
+        pins: vertices pinned in place (their position held, their frame free).
         pieces: rows its needle splitting appended to the set's scene (bound or not).
         split: the input rows it split (their rows hold a first piece until it is removed).
     """
@@ -49,6 +59,8 @@ class RodEntry:
     bound: BoundRod
     rest_edge_frames: np.ndarray
     length: float
+    clamp: Clamp = "both"
+    pins: frozenset[int] = frozenset()
     pieces: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0, np.int64))
     split: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0, np.int64))
 
@@ -67,12 +79,13 @@ class RodSet:
     Each rod's needle Gaussians are split when it is added (docs/deformation.md, "Subdivision"):
     the pieces are appended to `scene`, which so grows; `source` maps its rows to the input's.
     When a rod is removed its Gaussians go back to the input's and its extra pieces are hidden
-    (opacity 0, left out of `export_scene`); `reset` rebuilds everything from the input.
+    (opacity 0, left out of `export_scene`). Material, clamps and `reset` rebuild the simulated
+    rods at rest and keep the scene's rows, so the browser is sent nothing but their poses.
 
     Args:
         scene: the scene at rest.
-        params: material of new rods (each takes its extraction's radius).
-        clamp_ends: clamp both ends of every rod (the authors' app does).
+        material: how the rods swing (default `Material()`; each takes its extraction's radius).
+        clamp: how new rods are held ("both" ends, as in the authors' app).
         skin_each_frame: skin the scene in every `step`; when False, `skinned` and
             `deformed_scene` skin on demand (for displays that move Gaussians by segment poses).
         subdivide: split needles when a rod is added.
@@ -90,18 +103,20 @@ class RodSet:
     def __init__(
         self,
         scene: GaussianScene,
-        params: RodParams = RodParams(),
-        clamp_ends: bool = True,
+        material: Material | None = None,
+        clamp: Clamp = "both",
         skin_each_frame: bool = True,
         subdivide: bool = True,
     ) -> None:
+        if clamp not in CLAMPS:
+            raise SketchRodGSError(f"clamp: expected one of {', '.join(CLAMPS)}, got {clamp!r}")
         self.input_scene = scene
         self.scene = scene
         self.source = np.arange(len(scene), dtype=np.int64)
         self.hidden = np.zeros(len(scene), bool)
         self.subdivide = subdivide
-        self.params = params
-        self.clamp_ends = clamp_ends
+        self.material = material or Material()
+        self.clamp = clamp
         self.skin_each_frame = skin_each_frame
         self._stale = False
         self.lock = threading.RLock()
@@ -109,12 +124,14 @@ class RodSet:
         self.quats = scene.quats.copy()
         self.scales = scene.scales.copy()
         self._world = World()
+        self._world.contact = ContactSettings(scene=True, rods=True)
         self._entries: list[RodEntry] = []
         self._next_id = 0
         self._awake = False
         self._quiet = 0
         self._previous: list[np.ndarray] = []
-        self.version = 0  # bumped whenever rods are added, removed or rebuilt
+        self._changed: list[np.ndarray] = []  # rows of `scene` whose Gaussian was replaced
+        self.layout = 0  # bumped whenever rods are added or removed (what the contact field depends on)
 
     # ----- rods -----
 
@@ -131,7 +148,7 @@ class RodSet:
             for entry in self._entries:
                 if entry.id == rod_id:
                     return entry
-        raise SketchRodGSError(f"no rod {rod_id}")
+        raise SketchRodGSError(f"there is no rod {rod_id}")
 
     def owned_ids(self) -> np.ndarray:
         """(K,) int64 the Gaussians (rows of `scene`) that follow some rod."""
@@ -140,35 +157,70 @@ class RodSet:
                 return np.empty(0, np.int64)
             return np.concatenate([e.gaussian_ids for e in self._entries])
 
-    def off_scene_node(self) -> np.ndarray:
-        """(K,) int64 rows the scene node leaves out: the rods' and the hidden ones."""
+    def static_rows(self) -> np.ndarray:
+        """(N',) bool the rows drawn at rest: of no rod and not hidden."""
         with self.lock:
-            return np.concatenate([self.owned_ids(), np.flatnonzero(self.hidden)])
+            static = ~self.hidden
+            static[self.owned_ids()] = False
+            return static
 
-    def add(self, extraction: Extraction) -> RodEntry:
+    def take_changed_rows(self) -> np.ndarray:
+        """(K,) int64 rows of `scene` whose Gaussian was replaced since the last call (rows a rod
+        split or gave back; rows appended since are not included)."""
+        with self.lock:
+            rows = np.unique(np.concatenate(self._changed)) if self._changed else np.empty(0, np.int64)
+            self._changed = []
+            return rows
+
+    def add(
+        self, extraction: Extraction, rod_id: int | None = None, clamp: Clamp | None = None, pins: Sequence[int] = ()
+    ) -> RodEntry:
         """Build a rod from `extraction` and bind its Gaussians; those already owned by another
         rod stay with that rod.
 
+        Args:
+            extraction: the rod.
+            rod_id: its id (to put a removed rod back); default a new one.
+            clamp: how it is held (default `self.clamp`).
+            pins: vertices to pin.
+
         Raises:
-            SketchRodGSError: the extraction binds Gaussians the scene does not have, or its
-                polyline cannot be a rod (SimulationError).
+            RodRefused: most of its Gaussians follow one rod already (the same stroke twice), or
+                none would follow it.
+            SketchRodGSError: the extraction binds Gaussians the scene does not have, its polyline
+                cannot be a rod (SimulationError), or `rod_id` is taken.
         """
         ids = extraction.binding.gaussian_ids
-        if len(ids) and (ids.min() < 0 or ids.max() >= len(self.scene)):
-            raise SketchRodGSError(f"rod binds Gaussian {int(ids.max())} but the scene has {len(self.scene)}")
         with self.lock:
+            if len(ids) and (ids.min() < 0 or ids.max() >= len(self.scene)):
+                raise SketchRodGSError(f"rod binds Gaussian {int(ids.max())} but the scene has {len(self.scene)}")
+            if rod_id is not None and any(e.id == rod_id for e in self._entries):
+                raise SketchRodGSError(f"rod {rod_id} exists already")
+            for entry in self._entries:
+                mine = np.isin(ids, self.source[entry.gaussian_ids])
+                if len(ids) and mine.mean() > REPEAT_SHARE:
+                    raise RodRefused(f"that is rod {entry.id} again: select it under Rods to change or remove it")
             keep = ~np.isin(ids, self.owned_ids()) & ~self.hidden[ids]
+            if not keep.any():
+                raise RodRefused(
+                    "no Gaussian under the stroke would follow it"
+                    + (" (they all follow other rods)" if len(ids) else "")
+                    + ": draw along a part that is not a rod yet"
+                )
             extraction = _keep_binding(extraction, keep)
-            entry = self._build(self._next_id, extraction, self._world)
-            self._next_id += 1
+            rod_id = self._next_id if rod_id is None else rod_id
+            entry = self._build(rod_id, extraction, clamp or self.clamp, frozenset(pins))
+            self._next_id = max(self._next_id, rod_id + 1)
             self._entries.append(entry)
-            self._previous.append(np.asarray(entry.rod.positions))
-            self.version += 1
+            self._entries.sort(key=lambda e: e.id)
+            self._previous = [np.asarray(e.rod.positions) for e in self._entries]
+            self._changed.append(entry.split)
+            self.layout += 1
             return entry
 
-    def remove(self, rod_id: int) -> None:
-        """Remove a rod; its Gaussians go back to the input's at rest and stay there (the extra
-        pieces of its split needles are hidden)."""
+    def remove(self, rod_id: int) -> RodEntry:
+        """Remove a rod and return it; its Gaussians go back to the input's at rest and stay there
+        (the extra pieces of its split needles are hidden)."""
         with self.lock:
             entry = self.get(rod_id)
             k = self._entries.index(entry)
@@ -186,56 +238,65 @@ class RodSet:
                 self.means[rows] = self.scene.means[rows]
                 self.quats[rows] = self.scene.quats[rows]
                 self.scales[rows] = self.scene.scales[rows]
-            self.version += 1
+            self._changed.append(entry.split)
+            self.layout += 1
+            return entry
 
-    def clear(self) -> None:
+    def clear(self) -> list[RodEntry]:
+        """Remove every rod; returns them."""
         with self.lock:
-            for entry in list(self._entries):
-                self.remove(entry.id)
+            return [self.remove(entry.id) for entry in list(self._entries)]
 
     def reset(self) -> None:
-        """Every rod back to rest (rebuilt from the input scene with the current material and
-        clamps), nothing grabbed, nothing hidden."""
+        """Every rod back to rest, nothing grabbed (the rods are rebuilt; the scene is kept)."""
         with self.lock:
-            world = World()
-            self.scene, self.source = self.input_scene, np.arange(len(self.input_scene), dtype=np.int64)
-            self.hidden = np.zeros(len(self.scene), bool)
-            self.means, self.quats, self.scales = (getattr(self.scene, f).copy() for f in ("means", "quats", "scales"))
-            entries = list(self._entries)
-            self._entries = []
-            for e in entries:  # each binds with the ones before it taken
-                self._entries.append(self._build(e.id, e.extraction, world))
-            self._world = world
-            self._previous = [np.asarray(e.rod.positions) for e in self._entries]
-            self._stale = False
-            self._awake = False
-            self.version += 1
+            for entry in self._entries:
+                self._rebuild(entry)
 
-    def set_params(self, params: RodParams) -> None:
+    def set_material(self, material: Material) -> None:
         """New material for every rod; the rods restart from rest."""
         with self.lock:
-            self.params = params
+            self.material = material or Material()
             self.reset()
 
-    def set_clamp_ends(self, clamp: bool) -> None:
-        """Clamp (where they are now) or free both ends of every rod, live."""
+    def set_clamp(self, rod_id: int, clamp: Clamp) -> None:
+        """Hold rod `rod_id` at both ends, one end or none; it restarts from rest (its E follows,
+        see `Material`)."""
+        if clamp not in CLAMPS:
+            raise SketchRodGSError(f"clamp: expected one of {', '.join(CLAMPS)}, got {clamp!r}")
         with self.lock:
-            self.clamp_ends = clamp
-            for entry in self._entries:
-                for end in (0, -1):
-                    if clamp:
-                        entry.rod.clamp(end)
-                    else:
-                        entry.rod.free(end)
-                entry.bound = _eased(entry.bound, entry)
+            entry = self.get(rod_id)
+            entry.clamp = clamp
+            self._rebuild(entry)
+
+    def set_pinned(self, rod_id: int, vertex: int, pinned: bool) -> None:
+        """Pin vertex `vertex` of rod `rod_id` where it is now, or free it, live.
+
+        Raises:
+            SketchRodGSError: no such rod or vertex, or the vertex is a clamped end.
+        """
+        with self.lock:
+            entry = self.get(rod_id)
+            count = entry.rod.num_vertices
+            if not 0 <= vertex < count:
+                raise SketchRodGSError(f"rod {rod_id} has no vertex {vertex} (it has {count})")
+            if entry.rod.boundaries[vertex] == "clamped":
+                raise SketchRodGSError(f"vertex {vertex} of rod {rod_id} is a clamped end")
+            grabbed = entry.rod.grabbed
+            if pinned and grabbed is not None and grabbed[0] == vertex:
+                entry.rod.release()
+            if pinned:
+                entry.rod.pin(vertex)
+                entry.pins = entry.pins | {vertex}
+            else:
+                entry.rod.free(vertex)
+                entry.pins = entry.pins - {vertex}
             self.wake()
 
-    def _build(self, rod_id: int, extraction: Extraction, world: World) -> RodEntry:
-        material = RodParams(**{**self.params.to_dict(), "radius": extraction.radius})
-        rod = Rod(extraction.polyline, params=material, world=world)
-        if self.clamp_ends:
-            rod.clamp(0)
-            rod.clamp(-1)
+    def _build(self, rod_id: int, extraction: Extraction, clamp: Clamp, pins: frozenset[int]) -> RodEntry:
+        polyline = np.asarray(extraction.polyline, np.float64)
+        length = float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
+        rod = self._new_rod(extraction, length, clamp, pins)
         taken = np.zeros(len(self.scene), bool)
         taken[self.owned_ids()] = True
         taken |= self.hidden
@@ -251,16 +312,74 @@ class RodSet:
             grown = np.concatenate([getattr(self, field), getattr(rig.scene, field)[old:]])
             grown[split] = getattr(rig.scene, field)[split]
             setattr(self, field, np.ascontiguousarray(grown))
-        polyline = np.asarray(extraction.polyline, np.float64)
-        length = float(np.linalg.norm(np.diff(polyline, axis=0), axis=1).sum())
-        return RodEntry(
-            rod_id, extraction, rod, rig.bound[0], np.array(rod.edge_frames, np.float64), length, pieces, split
-        )
+        frames = np.array(rod.edge_frames, np.float64)
+        return RodEntry(rod_id, extraction, rod, rig.bound[0], frames, length, clamp, pins, pieces, split)
+
+    def _new_rod(self, extraction: Extraction, length: float, clamp: Clamp, pins: frozenset[int]) -> Rod:
+        params = self.material.rod_params(length, extraction.radius, clamp)
+        rod = Rod(extraction.polyline, params=params, world=self._world)
+        if clamp in ("both", "start"):
+            rod.clamp(0)
+        if clamp in ("both", "end"):
+            rod.clamp(-1)
+        for vertex in sorted(pins):
+            if rod.boundaries[vertex] == "free":
+                rod.pin(vertex)
+        if any(self.material.gravity):
+            try:  # the captured shape is the shape under gravity: it does not sag at once
+                rod.hold_under_gravity()
+            except SimulationError:  # nothing holds it up (no clamp): it falls
+                pass
+        return rod
+
+    def _rebuild(self, entry: RodEntry) -> None:
+        """`entry`'s rod made again at rest with the set's material and its clamp and pins."""
+        self._world.remove(entry.rod)
+        entry.rod = self._new_rod(entry.extraction, entry.length, entry.clamp, entry.pins)
+        entry.bound = _eased(entry.bound, entry)
+        rows = entry.gaussian_ids
+        self.means[rows] = self.scene.means[rows]
+        self.quats[rows] = self.scene.quats[rows]
+        self.scales[rows] = self.scene.scales[rows]
+        self._previous = [np.asarray(e.rod.positions) for e in self._entries]
+        self.wake()  # one frame sends the rest pose
+
+    # ----- contact with the scene (the field is built by `contact.SceneContact`) -----
+
+    @property
+    def contact(self) -> ContactSettings:
+        with self.lock:
+            return self._world.contact
+
+    def set_contact(self, on: bool, friction: float = 0.0) -> None:
+        """Rods keep out of the scene's solid parts and of each other (or not), with `friction`."""
+        if not (np.isfinite(friction) and friction >= 0):
+            raise SketchRodGSError(f"friction: must be >= 0, got {friction}")
+        with self.lock:
+            self._world.contact = ContactSettings(scene=on, rods=on, friction=float(friction))
+            self.wake()
+
+    def set_scene_field(self, field: SceneField | None) -> None:
+        """The scene's solid parts the rods keep out of (None: nothing)."""
+        with self.lock:
+            if field is None:
+                self._world.set_scene_field(None)
+            else:
+                self._world.set_scene_field(field.values, field.origin, field.spacing)
+
+    @property
+    def has_scene_field(self) -> bool:
+        with self.lock:
+            return self._world.has_scene_field
 
     # ----- interaction -----
 
     def grab(self, rod_id: int, vertex: int, target: Sequence[float] | np.ndarray) -> None:
-        """From the next step on, `vertex` of rod `rod_id` follows `target`."""
+        """From the next step on, `vertex` of rod `rod_id` follows `target`.
+
+        Raises:
+            SketchRodGSError: no such rod, or the vertex is clamped or pinned.
+        """
         with self.lock:
             self.get(rod_id).rod.grab(vertex, target)
             self.wake()
@@ -276,6 +395,13 @@ class RodSet:
         with self.lock:
             for entry in self._entries:
                 if entry.id == rod_id and entry.rod.grabbed is not None:
+                    entry.rod.release()
+            self.wake()
+
+    def release_all(self) -> None:
+        with self.lock:
+            for entry in self._entries:
+                if entry.rod.grabbed is not None:
                     entry.rod.release()
             self.wake()
 
@@ -343,7 +469,7 @@ class RodSet:
             return self.scene.replace(means=means.copy(), quats=quats.copy(), scales=scales.copy())
 
     def export_scene(self) -> GaussianScene:
-        """The scene now without the hidden rows (what "Export deformed .ply" writes)."""
+        """The scene now without the hidden rows (what "Download deformed .ply" writes)."""
         with self.lock:
             scene = self.deformed_scene()
             return scene if not self.hidden.any() else scene.subset(np.flatnonzero(~self.hidden))

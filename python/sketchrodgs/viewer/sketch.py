@@ -3,7 +3,8 @@
 The browser sends the pointer about 20 times a second while the left button is held, so the
 stroke is the polyline through those samples. The camera is read once, when the stroke starts
 (the camera does not move while sketching); extraction renders the scene from it at a working
-resolution, whatever the size of the browser's canvas.
+resolution, whatever the size of the browser's canvas. While it is drawn, the band the path
+search looks in is drawn around it (`Stroke.brush`): the brush's width.
 """
 
 from __future__ import annotations
@@ -17,6 +18,11 @@ from ..errors import SketchRodGSError
 from ..extract import Extraction, extract_rod
 from ..scene import GaussianScene
 from .camera import screen_to_pixels, unproject
+
+# The path search looks this share of the image width either side of the stroke, or 1.25 R where
+# that is wider (`extract_rod`'s band_px default).
+BAND_SHARE = 0.01
+BRUSH_SIDES = 24  # segments of the circle drawn at the pointer
 
 
 @dataclass(frozen=True)
@@ -64,6 +70,26 @@ class Stroke:
     def world_points(self, depth: float) -> np.ndarray:
         """(S, 3) the stroke placed at camera depth `depth` (to draw it in the scene)."""
         return unproject(self.pixels(), self.camera, depth)
+
+    def brush(self, depth: float) -> np.ndarray:
+        """(K, 2, 3) line segments at camera depth `depth` outlining the band the path search looks
+        in: its two edges along the stroke and a circle of its half-width at the stroke's end."""
+        pixels = self.pixels().astype(np.float64)
+        half = BAND_SHARE * self.camera.width
+        lines = []
+        if len(pixels) > 1:
+            tangent = np.gradient(pixels, axis=0)
+            tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+            normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+            lines += [pixels + half * normal, pixels - half * normal]
+        if len(pixels):
+            angle = np.linspace(0, 2 * np.pi, BRUSH_SIDES + 1)
+            lines.append(pixels[-1] + half * np.stack([np.cos(angle), np.sin(angle)], axis=1))
+        segments = [np.stack([line[:-1], line[1:]], axis=1) for line in lines]
+        if not segments:
+            return np.empty((0, 2, 3), np.float32)
+        flat = np.concatenate(segments).reshape(-1, 2)
+        return unproject(flat, self.camera, depth).reshape(-1, 2, 3).astype(np.float32)
 
 
 def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> Extraction:

@@ -125,6 +125,21 @@ class SplatArrays:
     def __len__(self) -> int:
         return len(self.centers)
 
+    def updated(self, scene: GaussianScene, rows: np.ndarray) -> SplatArrays:
+        """These arrays made current for `scene`, a later state of the scene they were made from:
+        `rows` replaced and the rows it has beyond them appended (the rest is not looked at)."""
+        old = len(self)
+        if old == len(scene) and len(rows) == 0:
+            return self
+        rows = np.asarray(rows, np.int64)
+        changed = SplatArrays.from_scene(scene.subset(np.concatenate([rows, np.arange(old, len(scene))])))
+        arrays = []
+        for name in ("centers", "covariances", "rgbs", "opacities"):
+            values = np.concatenate([getattr(self, name), getattr(changed, name)[len(rows) :]])
+            values[rows] = getattr(changed, name)[: len(rows)]
+            arrays.append(values)
+        return SplatArrays(*arrays)
+
     def subset(self, rows: np.ndarray) -> SplatArrays:
         rows = np.asarray(rows, np.int64)
         return SplatArrays(self.centers[rows], self.covariances[rows], self.rgbs[rows], self.opacities[rows])
