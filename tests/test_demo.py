@@ -76,3 +76,16 @@ def test_demo_view_serves_the_viewer_with_the_rod(tmp_path):
     finally:
         process.terminate()
         process.wait(timeout=30)
+
+
+def test_demo_contact_shows_a_stem_stopping_at_the_main_stem(tmp_path):
+    from sketchrodgs.demo import push_past_the_main_stem
+
+    summary = push_past_the_main_stem(tmp_path, progress=lambda line: None)
+    # with contact the stem's surface stays out of the main stem (its axis a radius away); without
+    # it the axis goes right up to it or into it
+    assert summary["closest_on_radii"] > 0.95, summary
+    assert summary["closest_off_radii"] < 0.5, summary
+    picture = np.asarray(Image.open(tmp_path / "contact.png"))
+    assert picture.shape[1] > 3 * picture.shape[0] / 2  # three panels side by side
+    assert (tmp_path / "contact.mp4").stat().st_size > 1000 and summary["frames"] == 54

@@ -120,6 +120,71 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
     return summary
 
 
+def push_past_the_main_stem(out_dir: str | Path, progress: Callable[[str], Any] = print) -> dict[str, Any]:
+    """Contact on the bundled plant (docs/contact.md): its left side stem, held at its far end, its
+    near end dragged up past the main stem, once with contact and once without (the prepared push
+    of `data/plant_contact.json`). Writes `contact.png` (at rest, contact on, contact off, at the
+    end of the hold, seen from another side) and `contact.mp4` (the push with contact, released)."""
+    import json
+    from importlib import resources
+
+    from PIL import Image, ImageDraw
+
+    from .camera import Camera
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    push = json.loads(resources.files(data).joinpath("plant_contact.json").read_text())
+    scene = load_scene(data.sample("plant"))
+    camera = Camera.from_dict(push["camera"], "plant_contact.json camera")
+    shown = Camera.from_dict(push["show_camera"], "plant_contact.json show_camera")
+    extraction = extract_rod(scene, camera, np.asarray(push["stroke"]["points"], np.float64), radius=push["radius"])
+    polyline = extraction.polyline.astype(np.float64)
+    grab = int(push["grab"])
+    offset = camera.screen_offset(polyline[grab], push["drag"])
+    pull = Pull(grab, tuple(offset), duration=0.5, hold=0.3, release=True, settle=1.0)
+    held = round((pull.duration + pull.hold) * FPS) - 1  # the last frame before the release
+    panels = [to_uint8(render(scene, shown, background=BACKGROUND).rgb_image)]
+    frames: list[np.ndarray] = []
+    field = None
+    closest: dict[bool, float] = {}
+    for contact in (True, False):
+        animation = Animation(scene, [extraction], clamp=push["clamp"], contact=contact)
+        field = animation.field if contact else field
+        renderer = FrameRenderer(animation.rest_scene, shown, animation.moving_rows, background=BACKGROUND)
+        for frame in animation.frames(pull, FPS):
+            if contact or frame.index == held:
+                rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb_image)
+                frames += [rgb] if contact else []
+                panels += [rgb] if frame.index == held else []
+            if frame.index <= held and field is not None:
+                # how close the stem's axis came to the scene's solid parts, in radii
+                now = float(field.distance(animation.rods[0].positions).min()) / extraction.radius
+                closest[contact] = min(closest.get(contact, np.inf), now)
+            if frame.index == held and not contact:
+                break
+        progress(f"pushed with contact {'on' if contact else 'off'}")
+    # around the stem and where it was pulled to
+    uv, _ = shown.project(np.concatenate([polyline, polyline + offset]))
+    low = np.maximum(uv.min(axis=0) - 80, 0).astype(int)
+    high = np.minimum(uv.max(axis=0) + 80, [shown.width, shown.height]).astype(int)
+    width, height = high - low
+    picture = Image.new("RGB", (3 * width + 20, height + 24), "white")
+    captions = ["at rest", "pulled, contact on: it stops at the main stem", "contact off: it passes through"]
+    for k, (rgb, caption) in enumerate(zip(panels, captions)):
+        picture.paste(Image.fromarray(rgb[low[1] : high[1], low[0] : high[0]]), (k * (width + 10), 24))
+        ImageDraw.Draw(picture).text((k * (width + 10) + 4, 6), caption, fill=(0, 0, 0))
+    save_png(out / "contact.png", np.asarray(picture))
+    write_video(out / "contact.mp4", frames, FPS)
+    return {
+        "frames": len(frames),
+        "closest_on_radii": closest.get(True),
+        "closest_off_radii": closest.get(False),
+        "total_s": round(time.perf_counter() - start, 2),
+    }
+
+
 def _write_summary(path: Path, summary: dict[str, Any]) -> None:
     from .atomic import atomic_write_text
 

@@ -19,6 +19,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--view", action="store_true", help="then open the browser viewer on the plant with the rod ready to pull"
     )
     parser.add_argument("--port", type=int, default=8080, help="port for --view (default 8080)")
+    parser.add_argument(
+        "--contact",
+        action="store_true",
+        help="also drag a side stem past the main stem with contact on and off: contact.png, contact.mp4",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,6 +38,11 @@ def run(args: argparse.Namespace) -> int:
         f"wrote {out}/: view.png, overlay.png, pulled.png, rod.json (+ rod.bindings.npz), frames/ ({summary['frames']} PNGs), "
         f"pull.mp4, summary.txt in {summary['total_s']:.1f} s"
     )
+    if args.contact:
+        from ..demo import push_past_the_main_stem
+
+        pushed = push_past_the_main_stem(out, progress=lambda line: print(f"  {line}", flush=True))
+        print(f"wrote {out}/: contact.png, contact.mp4 ({pushed['frames']} frames) in {pushed['total_s']:.1f} s")
     if args.view:
         from . import main  # the same `view` command a user would type
 
