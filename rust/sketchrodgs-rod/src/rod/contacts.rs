@@ -12,6 +12,22 @@ const SLIDES: usize = 4;
 /// penalty then pushes it back), no further.
 const STEP_SLACK: f64 = 0.5;
 
+/// The penalty of a penetration `depth` of a point of radius `r` (docs/contact.md): its energy,
+/// force and stiffness. Quadratic (`k/2 depth^2`) past `SMOOTHING * r`, cubic below, so that the
+/// stiffness grows from zero instead of jumping to `k` where a point starts to touch: Newton's
+/// steps then do not chatter as points at the edge of a contact flip in and out.
+fn penalty(k: f64, r: f64, depth: f64) -> (f64, f64, f64) {
+    let eps = SMOOTHING * r;
+    if depth < eps {
+        (k * depth.powi(3) / (6.0 * eps), k * depth * depth / (2.0 * eps), k * depth / eps)
+    } else {
+        (k * (depth * depth / 2.0 - eps * depth / 2.0 + eps * eps / 6.0), k * (depth - eps / 2.0), k)
+    }
+}
+
+/// Share of the radius over which the penalty's stiffness ramps up.
+const SMOOTHING: f64 = 0.01;
+
 impl ElasticRod {
     /// Sets what the rod touches from now on (the World does before each step).
     pub(crate) fn set_obstacles(&mut self, obstacles: Obstacles) {
@@ -51,7 +67,7 @@ impl ElasticRod {
         let (k, r) = (self.contact_stiffness, self.params.radius);
         let mut energy = 0.0;
         self.each_contact_point(x, |p, edge, _| {
-            self.obstacles.each_push(p, r, edge, |push| energy += 0.5 * k * push.depth * push.depth);
+            self.obstacles.each_push(p, r, edge, |push| energy += penalty(k, r, push.depth).0);
         });
         energy
     }
@@ -67,10 +83,11 @@ impl ElasticRod {
             self.obstacles.each_push(p, r, edge, |push| pushes.push((weights, push)));
         });
         for (weights, Push { depth, gradient }) in pushes {
+            let (_, force, stiffness) = penalty(k, r, depth);
             // E = k/2 depth², d(depth)/dp = -gradient
             for &(i, w) in weights.iter().filter(|(_, w)| *w != 0.0) {
                 for c in 0..3 {
-                    self.grad[dof_x(i) + c] -= w * k * depth * gradient[c];
+                    self.grad[dof_x(i) + c] -= w * force * gradient[c];
                 }
             }
             if !with_hessian {
@@ -85,7 +102,7 @@ impl ElasticRod {
                         for rb in 0..3 {
                             let (row, col) = (dof_x(a) + ra, dof_x(b) + rb);
                             if row >= col {
-                                self.hess.add_lower(row, col, wa * wb * k * gradient[ra] * gradient[rb]);
+                                self.hess.add_lower(row, col, wa * wb * stiffness * gradient[ra] * gradient[rb]);
                             }
                         }
                     }
@@ -176,7 +193,7 @@ impl ElasticRod {
             if speed <= 0.0 || self.mass[i] <= 0.0 {
                 continue;
             }
-            let loss = mu * k * depth * h / self.mass[i];
+            let loss = mu * penalty(k, r, depth).1 * h / self.mass[i];
             self.state.v[i] = v - tangential * (loss / speed).min(1.0);
         }
     }
