@@ -80,18 +80,45 @@ impl DistanceField {
     /// nodes at most 2 cells from the nearest one, and node values, distances, differ by at most
     /// their distance apart.
     pub fn sample_within(&self, p: DVec3, within: f64) -> Option<(f64, DVec3)> {
+        self.near_surface(p, within).map(|g| self.spline(g))
+    }
+
+    /// The distance alone where it may be under `within` (as [`Self::sample_within`]): the line
+    /// search's energies need no gradient.
+    pub fn value_within(&self, p: DVec3, within: f64) -> Option<f64> {
+        self.near_surface(p, within).map(|g| self.spline_value(g))
+    }
+
+    /// The grid coordinates of `p` where the distance there may be under `within`.
+    fn near_surface(&self, p: DVec3, within: f64) -> Option<DVec3> {
         let g = (p - self.origin) / self.spacing;
         let [nx, ny, nz] = self.dims;
         let inside = |v: f64, n: usize| v >= 0.0 && v <= (n - 1) as f64;
         if !(inside(g.x, nx) && inside(g.y, ny) && inside(g.z, nz)) {
             return None;
         }
-        let node = |v: f64| v.round() as usize;
+        let node = |v: f64| (v + 0.5) as usize; // rounded: v >= 0
         let nearest = f64::from(self.values[node(g.x) + nx * (node(g.y) + ny * node(g.z))]);
-        if nearest - SPLINE_REACH * self.spacing >= within {
-            return None;
+        (nearest - SPLINE_REACH * self.spacing < within).then_some(g)
+    }
+
+    /// The spline's value alone at grid coordinates `g` (inside the grid).
+    fn spline_value(&self, g: DVec3) -> f64 {
+        let [nx, ny, nz] = self.dims;
+        let (wx, ix) = spline_weights(g.x, nx);
+        let (wy, iy) = spline_weights(g.y, ny);
+        let (wz, iz) = spline_weights(g.z, nz);
+        let mut value = 0.0;
+        for (c, &k) in iz.iter().enumerate() {
+            let mut plane = 0.0;
+            for (b, &j) in iy.iter().enumerate() {
+                let row = &self.values[nx * (j + ny * k)..];
+                let line: f64 = ix.iter().zip(&wx[0]).map(|(&i, w)| f64::from(row[i]) * w).sum();
+                plane += line * wy[0][b];
+            }
+            value += plane * wz[0][c];
         }
-        Some(self.spline(g))
+        value
     }
 
     /// The spline's value and gradient at grid coordinates `g` (inside the grid).
@@ -175,7 +202,7 @@ impl DistanceField {
 /// The cubic B-spline weights (values, then derivatives) of the four nodes around grid coordinate
 /// `g` along an axis of `n` nodes, and those nodes (clamped to the grid).
 fn spline_weights(g: f64, n: usize) -> ([[f64; 4]; 2], [usize; 4]) {
-    let cell = (g.floor() as usize).min(n - 2);
+    let cell = (g as usize).min(n - 2); // floor: g >= 0
     let t = g - cell as f64;
     let u = 1.0 - t;
     let (t2, t3) = (t * t, t * t * t);
@@ -336,6 +363,23 @@ impl CapsuleTree {
     }
 }
 
+impl CapsuleTree {
+    /// How much further apart than touching the capsules `j` and `k` with `k > j + skip` are,
+    /// up to `cap` (0 where two touch): a tree that is one rod's edges, with `skip` neighbours.
+    pub fn clearance(&self, skip: usize, cap: f64) -> f64 {
+        let mut clearance = cap;
+        for (j, c) in self.capsules.iter().enumerate() {
+            let later = 0..j + skip + 1;
+            self.each_near(c.a.min(c.b), c.a.max(c.b), c.radius + cap, later, |_, d| {
+                let (s, t) = closest_parameters(c.a, c.b, d.a, d.b);
+                let gap = c.a.lerp(c.b, s).distance(d.a.lerp(d.b, t)) - c.radius - d.radius;
+                clearance = clearance.min(gap.max(0.0));
+            });
+        }
+        clearance
+    }
+}
+
 /// What one rod touches during a step.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Obstacles {
@@ -346,6 +390,11 @@ pub(crate) struct Obstacles {
     pub own: CapsuleTree,
     /// Own edges within this many edges of a contact point's edge are its neighbours, not obstacles.
     pub own_skip: usize,
+    /// Where the rod's vertices were at the start of the step, and how much further apart than
+    /// touching its non-neighbouring edges were then (capped): while no vertex has moved half that
+    /// far, the rod cannot touch itself and its own edges need not be searched.
+    pub own_start: Vec<DVec3>,
+    pub own_clearance: f64,
 }
 
 /// One penetration: its depth (> 0) and the gradient of the distance it is measured by (the
@@ -363,9 +412,35 @@ impl Obstacles {
         self.field.is_none() && self.others.is_empty() && self.own.is_empty()
     }
 
-    /// The penetrations of a contact point at `p` of radius `radius`, on edge `edge` of its rod
-    /// (for self-contact), handed to `visit`.
-    pub fn each_push(&self, p: DVec3, radius: f64, edge: usize, mut visit: impl FnMut(Push)) {
+    /// Whether the rod may touch itself once its vertices have moved up to `moved` from where they
+    /// were at the start of the step.
+    pub fn may_touch_itself(&self, moved: f64) -> bool {
+        !self.own.is_empty() && 2.0 * moved >= self.own_clearance
+    }
+
+    /// How far the vertices `x` are from where they were at the start of the step (infinite when
+    /// that is not known).
+    pub fn moved(&self, x: &[DVec3]) -> f64 {
+        if self.own_start.len() != x.len() {
+            return f64::INFINITY;
+        }
+        x.iter().zip(&self.own_start).map(|(p, q)| p.distance(*q)).fold(0.0, f64::max)
+    }
+
+    /// The penetration depths alone of a contact point (as [`Self::each_push`]), for energies.
+    pub fn each_depth(&self, p: DVec3, radius: f64, edge: usize, own: bool, mut visit: impl FnMut(f64)) {
+        if let Some(field) = &self.field
+            && let Some(d) = field.value_within(p, radius)
+            && d < radius
+        {
+            visit(radius - d);
+        }
+        self.each_capsule_push(p, radius, edge, own, |push| visit(push.depth));
+    }
+
+    /// The penetrations of a contact point at `p` of radius `radius`, on edge `edge` of its rod,
+    /// handed to `visit`; its own rod's edges too where `own` (`may_touch_itself`).
+    pub fn each_push(&self, p: DVec3, radius: f64, edge: usize, own: bool, mut visit: impl FnMut(Push)) {
         if let Some(field) = &self.field
             && let Some((d, grad)) = field.sample_within(p, radius)
             && d < radius
@@ -373,6 +448,11 @@ impl Obstacles {
         {
             visit(Push { depth: radius - d, gradient: grad });
         }
+        self.each_capsule_push(p, radius, edge, own, visit);
+    }
+
+    /// The penetrations of a contact point into other rods' capsules and its own far ones.
+    fn each_capsule_push(&self, p: DVec3, radius: f64, edge: usize, own: bool, mut visit: impl FnMut(Push)) {
         let mut touch = |capsule: &Capsule| {
             let away = p - capsule.nearest(p);
             let dist = away.length();
@@ -382,7 +462,71 @@ impl Obstacles {
             }
         };
         self.others.each_near(p, p, radius, 0..0, |_, c| touch(c));
-        let neighbours = edge.saturating_sub(self.own_skip)..edge + self.own_skip + 1;
-        self.own.each_near(p, p, radius, neighbours, |_, c| touch(c));
+        if own {
+            let neighbours = edge.saturating_sub(self.own_skip)..edge + self.own_skip + 1;
+            self.own.each_near(p, p, radius, neighbours, |_, c| touch(c));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+    use super::*;
+
+    fn capsules(points: &[DVec3], radius: f64) -> CapsuleTree {
+        CapsuleTree::new(points.windows(2).map(|w| Capsule { a: w[0], b: w[1], radius }).collect())
+    }
+
+    /// A hairpin: out along x, a half turn, back 3 r above itself (a gap of r between the arms).
+    fn hairpin(r: f64) -> Vec<DVec3> {
+        let out = (0..20).map(|i| DVec3::new(0.01 * i as f64, 0.0, 0.0));
+        let turn = (1..8).map(|i| {
+            let a = std::f64::consts::PI * i as f64 / 8.0;
+            DVec3::new(0.19 + 1.5 * r * a.sin(), 1.5 * r * (1.0 - a.cos()), 0.0)
+        });
+        let back = (0..20).map(|i| DVec3::new(0.19 - 0.01 * i as f64, 3.0 * r, 0.0));
+        out.chain(turn).chain(back).collect()
+    }
+
+    #[test]
+    fn the_clearance_of_a_rod_is_the_gap_between_its_far_edges() {
+        let r = 0.01;
+        let straight: Vec<DVec3> = (0..40).map(|i| DVec3::new(0.01 * i as f64, 0.0, 0.0)).collect();
+        // the nearest non-neighbours along a straight rod: 5 edges of arc apart, less two radii
+        let along = capsules(&straight, r).clearance(5, 4.0 * r);
+        assert!((along - (0.05 - 2.0 * r)).abs() < 1e-9, "{along}");
+        assert_eq!(capsules(&straight, r).clearance(10, 4.0 * r), 4.0 * r); // nothing near: the cap
+        // a hairpin: what every pair of edges more than 5 apart says
+        let points = hairpin(r);
+        let edges: Vec<Capsule> = points.windows(2).map(|w| Capsule { a: w[0], b: w[1], radius: r }).collect();
+        let mut brute = 4.0 * r;
+        for (j, c) in edges.iter().enumerate() {
+            for d in edges.iter().skip(j + 6) {
+                let (s, t) = closest_parameters(c.a, c.b, d.a, d.b);
+                brute = brute.min((c.a.lerp(c.b, s).distance(d.a.lerp(d.b, t)) - 2.0 * r).max(0.0));
+            }
+        }
+        let gap = capsules(&points, r).clearance(5, 4.0 * r);
+        assert!(brute < r && (gap - brute).abs() < 1e-12, "{gap} {brute}");
+    }
+
+    #[test]
+    fn a_tree_finds_every_capsule_a_brute_force_search_finds() {
+        let points = hairpin(0.01);
+        let tree = capsules(&points, 0.01);
+        for p in [DVec3::new(0.1, 0.015, 0.0), DVec3::new(0.2, 0.02, 0.0), DVec3::new(0.05, -0.02, 0.01)] {
+            let mut found = Vec::new();
+            tree.each_near(p, p, 0.012, 3..6, |j, _| found.push(j));
+            found.sort_unstable();
+            let brute: Vec<usize> = (0..points.len() - 1)
+                .filter(|j| !(3..6).contains(j))
+                .filter(|&j| {
+                    let c = Capsule { a: points[j], b: points[j + 1], radius: 0.01 };
+                    c.nearest(p).distance(p) < 0.012 + 0.01
+                })
+                .collect();
+            assert!(brute.iter().all(|j| found.contains(j)), "{brute:?} not all in {found:?}");
+        }
     }
 }

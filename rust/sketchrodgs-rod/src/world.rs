@@ -5,6 +5,10 @@ use std::sync::Arc;
 use crate::contact::{CapsuleTree, Obstacles, closest_parameters};
 use crate::{DistanceField, ElasticRod, RodError, SolverSettings, StepReport};
 
+/// How far apart (in radii) a rod's own edges are measured at the start of a step, at most: it
+/// need not search them for self-contact until a vertex has moved half that far.
+const CLEARANCE_RADII: f64 = 4.0;
+
 /// Rounds of [`World::separate_rods`] over all edge pairs.
 const SEPARATION_ROUNDS: usize = 4;
 
@@ -200,6 +204,9 @@ impl World {
                 if j == i {
                     obstacles.own = CapsuleTree::new(other.capsules());
                     obstacles.own_skip = other.own_skip();
+                    obstacles.own_start = other.positions().to_vec();
+                    let cap = CLEARANCE_RADII * other.params().radius;
+                    obstacles.own_clearance = obstacles.own.clearance(obstacles.own_skip, cap);
                 } else {
                     others.extend(other.capsules());
                 }

@@ -65,9 +65,10 @@ impl ElasticRod {
             return 0.0;
         }
         let (k, r) = (self.contact_stiffness, self.params.radius);
+        let own = self.obstacles.may_touch_itself(self.obstacles.moved(x));
         let mut energy = 0.0;
         self.each_contact_point(x, |p, edge, _| {
-            self.obstacles.each_push(p, r, edge, |push| energy += penalty(k, r, push.depth).0);
+            self.obstacles.each_depth(p, r, edge, own, |depth| energy += penalty(k, r, depth).0);
         });
         energy
     }
@@ -78,9 +79,10 @@ impl ElasticRod {
             return;
         }
         let (k, r) = (self.contact_stiffness, self.params.radius);
+        let own = self.obstacles.may_touch_itself(self.obstacles.moved(x));
         let mut pushes: Vec<([(usize, f64); 2], Push)> = Vec::new();
         self.each_contact_point(x, |p, edge, weights| {
-            self.obstacles.each_push(p, r, edge, |push| pushes.push((weights, push)));
+            self.obstacles.each_push(p, r, edge, own, |push| pushes.push((weights, push)));
         });
         for (weights, Push { depth, gradient }) in pushes {
             let (_, force, stiffness) = penalty(k, r, depth);
@@ -121,6 +123,8 @@ impl ElasticRod {
         }
         let r = self.params.radius;
         let motion = |i: usize| DVec3::new(dir[dof_x(i)], dir[dof_x(i) + 1], dir[dof_x(i) + 2]);
+        let farthest = (0..x.len()).map(|i| motion(i).length()).fold(0.0, f64::max);
+        let own = self.obstacles.may_touch_itself(self.obstacles.moved(x) + farthest);
         let mut limit: f64 = 1.0;
         self.each_contact_point(x, |p, edge, weights| {
             let dp = weights.iter().map(|&(i, w)| w * motion(i)).sum::<DVec3>();
@@ -129,7 +133,7 @@ impl ElasticRod {
                 return;
             }
             // obstacles within reach of this step: pushes against the grown radius
-            self.obstacles.each_push(p, r + speed, edge, |push| {
+            self.obstacles.each_push(p, r + speed, edge, own, |push| {
                 let depth = push.depth - speed; // below 0: a gap, within reach
                 let approaching = -dp.dot(push.gradient);
                 let room = STEP_SLACK * r - depth;
