@@ -585,6 +585,13 @@ def test_app_sketch_undo_redo_and_exports(tmp_path, ring):
         app.undo()
         assert app.rods.material.swing_period == Material().swing_period
         assert app.panel.swing_period.value == Material().swing_period
+        # under gravity a rod held nowhere cannot hang as captured: it falls, and the user is told
+        app.set_material(Material(gravity=(0.0, -9.81, 0.0)))
+        assert app.feedback.last.kind != "error"  # both rods are held at an end
+        app.set_clamp(other.id, "none")
+        assert app.feedback.last.kind == "error" and f"Rod {other.id} cannot hang" in app.feedback.last.title
+        app.undo()
+        app.undo()
         # exports: a .ply of the deformed scene and the rods as a zip
         assert len(load_any(app.export_ply())) == len(ring)
         name, data_bytes, _ = app._rods_download()

@@ -154,7 +154,8 @@ def run(args: argparse.Namespace) -> int:
     from ..io import load_scene
     from ..scene_identity import check_rod_scene
     from ..viewer import ViewerApp
-    from ..viewer.material import Material
+    from ..framing import AXES
+    from ..viewer.material import GRAVITY, Material
     from ..viewer.origin import is_loopback
     from ._framing import camera_file, scene_cameras
     from ._outputs import check_folder
@@ -175,7 +176,10 @@ def run(args: argparse.Namespace) -> int:
     # a rod file's damping, density and gravity; its stiffness follows from the swing period
     saved = loaded[0][1] if loaded else {}
     default = Material()
-    g = [float(v) for v in saved.get("gravity", default.gravity)]
+    # gravity on where the up direction is known (given, or the training cameras'), not guessed
+    known = up.source != "guess"
+    down = [-GRAVITY * v for v in AXES[up.axis]] if known else default.gravity
+    g = [float(v) for v in saved.get("gravity", down)]
     material = Material(
         swing_period=args.swing_period,
         damping=float(saved.get("damping", default.damping)),

@@ -726,6 +726,14 @@ class ViewerApp:
 
     def _refresh_panel(self, select: int | None = None) -> None:
         """Make the panel show the rods, the selected rod and what can be done now."""
+        for rod_id in self.rods.take_falling():
+            self.feedback.notify(
+                None,
+                "error",
+                f"Rod {rod_id} cannot hang as captured",
+                "Under gravity, what holds it cannot carry its weight, so it falls. Hold it at an end "
+                "(Held at), or turn Gravity off.",
+            )
         panel = self.panel
         with self._panel_lock:
             entries = self.rods.entries

@@ -126,6 +126,7 @@ class RodSet:
         self._world = World()
         self._world.contact = ContactSettings(scene=True, rods=True)
         self._entries: list[RodEntry] = []
+        self._falling: list[Rod] = []  # made since `take_falling`, unable to hang under gravity
         self._next_id = 0
         self._awake = False
         self._quiet = 0
@@ -328,9 +329,15 @@ class RodSet:
         if any(self.material.gravity):
             try:  # the captured shape is the shape under gravity: it does not sag at once
                 rod.hold_under_gravity()
-            except SimulationError:  # nothing holds it up (no clamp): it falls
-                pass
+            except SimulationError:  # nothing holds it up (no clamp): it falls, and the app says so
+                self._falling.append(rod)
         return rod
+
+    def take_falling(self) -> list[int]:
+        """Ids of the rods made since the last call whose holds cannot carry them under gravity."""
+        ids = [e.id for e in self._entries if any(e.rod is rod for rod in self._falling)]
+        self._falling.clear()
+        return ids
 
     def _rebuild(self, entry: RodEntry) -> None:
         """`entry`'s rod made again at rest with the set's material and its clamp and pins."""
