@@ -150,11 +150,10 @@ def run(args: argparse.Namespace) -> int:
 
     from ..camera import select_camera
     from ..extract import load_rod
-    from ..framing import frame_scene, scene_up
+    from ..framing import AXES, frame_scene, scene_up
     from ..io import load_scene
     from ..scene_identity import check_rod_scene
     from ..viewer import ViewerApp
-    from ..framing import AXES
     from ..viewer.material import GRAVITY, Material
     from ..viewer.origin import is_loopback
     from ._framing import camera_file, scene_cameras
