@@ -428,8 +428,9 @@ impl Obstacles {
     }
 
     /// The penetration depths alone of a contact point (as [`Self::each_push`]), for energies.
-    pub fn each_depth(&self, p: DVec3, radius: f64, edge: usize, own: bool, mut visit: impl FnMut(f64)) {
-        if let Some(field) = &self.field
+    pub fn each_depth(&self, p: DVec3, radius: f64, edge: usize, scene: bool, own: bool, mut visit: impl FnMut(f64)) {
+        if scene
+            && let Some(field) = &self.field
             && let Some(d) = field.value_within(p, radius)
             && d < radius
         {
@@ -439,9 +440,11 @@ impl Obstacles {
     }
 
     /// The penetrations of a contact point at `p` of radius `radius`, on edge `edge` of its rod,
-    /// handed to `visit`; its own rod's edges too where `own` (`may_touch_itself`).
-    pub fn each_push(&self, p: DVec3, radius: f64, edge: usize, own: bool, mut visit: impl FnMut(Push)) {
-        if let Some(field) = &self.field
+    /// handed to `visit`: into the scene where `scene`, into other rods, and into its own rod's
+    /// edges where `own` (`may_touch_itself`).
+    pub fn each_push(&self, p: DVec3, radius: f64, edge: usize, scene: bool, own: bool, mut visit: impl FnMut(Push)) {
+        if scene
+            && let Some(field) = &self.field
             && let Some((d, grad)) = field.sample_within(p, radius)
             && d < radius
             && grad.length_squared() > 1e-24

@@ -25,6 +25,10 @@ fn penalty(k: f64, r: f64, depth: f64) -> (f64, f64, f64) {
     }
 }
 
+/// Edges longer than this many radii have their midpoint meet the scene too: two spheres of radius
+/// `r` 0.6 r apart cover their capsule to within 0.046 r, under the 0.05 r a contact may sink.
+const SCENE_MIDPOINT_EDGE: f64 = 0.6;
+
 /// Share of the radius over which the penalty's stiffness ramps up.
 const SMOOTHING: f64 = 0.01;
 
@@ -48,14 +52,17 @@ impl ElasticRod {
     }
 
     /// Visits the contact points of configuration `x`: each vertex, and each edge's midpoint, as
-    /// (point, its edge, the vertices it moves with and their weights).
-    fn each_contact_point(&self, x: &[DVec3], mut visit: impl FnMut(DVec3, usize, [(usize, f64); 2])) {
+    /// (point, its edge, the vertices it moves with and their weights, whether it meets the scene).
+    /// A midpoint meets the scene only on an edge longer than `SCENE_MIDPOINT_EDGE` radii: the
+    /// vertices' spheres of a shorter edge already cover its capsule to within 0.046 R.
+    fn each_contact_point(&self, x: &[DVec3], mut visit: impl FnMut(DVec3, usize, [(usize, f64); 2], bool)) {
         let n = x.len();
         for i in 0..n {
-            visit(x[i], i.min(n - 2), [(i, 1.0), (i, 0.0)]);
+            visit(x[i], i.min(n - 2), [(i, 1.0), (i, 0.0)], true);
         }
+        let long = SCENE_MIDPOINT_EDGE * self.params.radius;
         for j in 0..n - 1 {
-            visit(0.5 * (x[j] + x[j + 1]), j, [(j, 0.5), (j + 1, 0.5)]);
+            visit(0.5 * (x[j] + x[j + 1]), j, [(j, 0.5), (j + 1, 0.5)], self.rest_len[j] > long);
         }
     }
 
@@ -67,8 +74,8 @@ impl ElasticRod {
         let (k, r) = (self.contact_stiffness, self.params.radius);
         let own = self.obstacles.may_touch_itself(self.obstacles.moved(x));
         let mut energy = 0.0;
-        self.each_contact_point(x, |p, edge, _| {
-            self.obstacles.each_depth(p, r, edge, own, |depth| energy += penalty(k, r, depth).0);
+        self.each_contact_point(x, |p, edge, _, scene| {
+            self.obstacles.each_depth(p, r, edge, scene, own, |depth| energy += penalty(k, r, depth).0);
         });
         energy
     }
@@ -81,8 +88,8 @@ impl ElasticRod {
         let (k, r) = (self.contact_stiffness, self.params.radius);
         let own = self.obstacles.may_touch_itself(self.obstacles.moved(x));
         let mut pushes: Vec<([(usize, f64); 2], Push)> = Vec::new();
-        self.each_contact_point(x, |p, edge, weights| {
-            self.obstacles.each_push(p, r, edge, own, |push| pushes.push((weights, push)));
+        self.each_contact_point(x, |p, edge, weights, scene| {
+            self.obstacles.each_push(p, r, edge, scene, own, |push| pushes.push((weights, push)));
         });
         for (weights, Push { depth, gradient }) in pushes {
             let (_, force, stiffness) = penalty(k, r, depth);
@@ -126,14 +133,14 @@ impl ElasticRod {
         let farthest = (0..x.len()).map(|i| motion(i).length()).fold(0.0, f64::max);
         let own = self.obstacles.may_touch_itself(self.obstacles.moved(x) + farthest);
         let mut limit: f64 = 1.0;
-        self.each_contact_point(x, |p, edge, weights| {
+        self.each_contact_point(x, |p, edge, weights, scene| {
             let dp = weights.iter().map(|&(i, w)| w * motion(i)).sum::<DVec3>();
             let speed = dp.length();
             if speed <= 0.0 {
                 return;
             }
             // obstacles within reach of this step: pushes against the grown radius
-            self.obstacles.each_push(p, r + speed, edge, own, |push| {
+            self.obstacles.each_push(p, r + speed, edge, scene, own, |push| {
                 let depth = push.depth - speed; // below 0: a gap, within reach
                 let approaching = -dp.dot(push.gradient);
                 let room = STEP_SLACK * r - depth;
