@@ -35,6 +35,7 @@
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 pub mod bin;
 pub mod camera;
@@ -273,7 +274,9 @@ fn render(
     let mut projected = project::project(splats, camera, with_color, tiles);
     let projected_at = Instant::now();
     let order = bin::sort_by_depth(&projected.splats, &projected.rects);
-    let n_pairs: usize = order.iter().map(|&i| projected.rects.get(i as usize).map_or(0, |r| r.area())).sum();
+    // every non-empty rectangle is in `order`: sum in row order (sequential reads, parallel)
+    let n_pairs: usize =
+        projected.rects.par_iter().with_min_len(project::MIN_GAUSSIANS_PER_TASK).map(|r| r.area()).sum();
     if n_pairs > MAX_TILE_PAIRS {
         return Err(RasterError::TooManyTilePairs(n_pairs));
     }
