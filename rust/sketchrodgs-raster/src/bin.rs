@@ -39,30 +39,37 @@ pub fn sort_by_depth(splats: &[Splat2D], rects: &[TileRect]) -> Vec<u32> {
     order
 }
 
-/// Stable LSD radix sort of `keys` by their upper 32 bits, 8 bits a pass: keys with equal upper
-/// halves keep their input order. Passes where every key has the same digit are skipped.
+/// Bits of the key sorted per radix pass: three passes cover the 32-bit depth, and a pass's
+/// counters (8 KiB) stay in L1.
+const RADIX_BITS: u32 = 11;
+const RADIX: usize = 1 << RADIX_BITS;
+
+/// Stable LSD radix sort of `keys` by their upper 32 bits, `RADIX_BITS` a pass: keys with equal
+/// upper halves keep their input order. Passes where every key has the same digit are skipped.
 fn radix_sort_by_high_word(keys: &mut Vec<u64>) {
-    let mut counts = [[0usize; 256]; 4];
+    const PASSES: usize = 32_u32.div_ceil(RADIX_BITS) as usize;
+    let digit = |k: u64, pass: usize| (k >> (32 + RADIX_BITS as usize * pass)) as usize & (RADIX - 1);
+    let mut counts = vec![[0u32; RADIX]; PASSES];
     for &k in keys.iter() {
         for (pass, count) in counts.iter_mut().enumerate() {
-            count[(k >> (32 + 8 * pass)) as usize & 0xff] += 1;
+            count[digit(k, pass)] += 1;
         }
     }
     let mut scratch = vec![0u64; keys.len()];
     for (pass, count) in counts.iter().enumerate() {
-        if count.contains(&keys.len()) {
+        if count.iter().any(|&c| c as usize == keys.len()) {
             continue;
         }
-        let mut next = [0usize; 256];
+        let mut next = [0u32; RADIX];
         let mut total = 0;
         for (slot, &c) in next.iter_mut().zip(count) {
             *slot = total;
             total += c;
         }
         for &k in keys.iter() {
-            let digit = (k >> (32 + 8 * pass)) as usize & 0xff;
-            scratch[next[digit]] = k;
-            next[digit] += 1;
+            let d = digit(k, pass);
+            scratch[next[d] as usize] = k;
+            next[d] += 1;
         }
         std::mem::swap(keys, &mut scratch);
     }

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use crate::bin::TileBins;
 use crate::camera::Camera;
 use crate::project::{Projected, Splat2D};
-use crate::simd::{F32x4, Mask4};
+use crate::simd::{F32x4, LaneMask, Lanes, Simd};
 use crate::tiles::TileMask;
 use crate::{ALPHA_MAX, ALPHA_MIN, RasterError, RenderMode, RenderOptions, RenderOutput, T_MIN, TILE_SIZE, try_filled};
 
@@ -112,6 +112,18 @@ pub fn composite_into<S: Source>(
     options: &RenderOptions,
     mask: Option<&TileMask>,
 ) {
+    composite_with(Simd::detect(), out, camera, source, options, mask);
+}
+
+/// [`composite_into`] with the lane width `simd` (which the CPU must have: from `Simd::detect`).
+pub(crate) fn composite_with<S: Source>(
+    simd: Simd,
+    out: &mut RenderOutput,
+    camera: &Camera,
+    source: &S,
+    options: &RenderOptions,
+    mask: Option<&TileMask>,
+) {
     let (width, height) = (camera.width as usize, camera.height as usize);
     let with_color = options.mode == RenderMode::Full;
     let grid_x = camera.tile_grid().0 as usize;
@@ -131,14 +143,37 @@ pub fn composite_into<S: Source>(
         };
         bands.push(Band { row0: b * TILE, rgb, alpha, depth, index, index_depth });
     }
-    let render_band = |band: Band| {
-        if with_color {
-            render_band::<true, S>(band, width, height, grid_x, source, options.background, mask)
-        } else {
-            render_band::<false, S>(band, width, height, grid_x, source, options.background, mask)
+    let render = |band: Band| {
+        let job = BandJob { width, height, grid_x, source, background: options.background, mask };
+        match (simd, with_color) {
+            (Simd::Four, true) => render_band::<true, F32x4, S>(band, &job),
+            (Simd::Four, false) => render_band::<false, F32x4, S>(band, &job),
+            #[cfg(target_arch = "x86_64")]
+            (Simd::Eight, colour) => render_band_eight(band, &job, colour),
         }
     };
-    bands.into_par_iter().with_max_len(1).for_each(render_band);
+    bands.into_par_iter().with_max_len(1).for_each(render);
+}
+
+/// What every band of one render shares.
+struct BandJob<'a, S> {
+    width: usize,
+    height: usize,
+    grid_x: usize,
+    source: &'a S,
+    background: [f32; 3],
+    mask: Option<&'a TileMask>,
+}
+
+/// [`render_band`] with eight lanes, compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+fn render_band_eight<S: Source>(band: Band, job: &BandJob<S>, colour: bool) {
+    #[target_feature(enable = "avx2")]
+    fn run<const COLOR: bool, S: Source>(band: Band, job: &BandJob<S>) {
+        render_band::<COLOR, crate::simd::F32x8, S>(band, job);
+    }
+    // SAFETY: `Simd::Eight` comes only from `Simd::detect`, which checked that the CPU has AVX2.
+    unsafe { if colour { run::<true, S>(band, job) } else { run::<false, S>(band, job) } }
 }
 
 /// `n` consecutive chunks of `len` (the last shorter), or `n` empty slices for an unused output.
@@ -151,13 +186,12 @@ fn split_bands<T>(buf: &mut [T], len: usize, n: usize) -> Vec<&mut [T]> {
 
 /// Gaussians fetched ahead of blending, per tile.
 const BATCH: usize = 64;
-/// Lanes per SIMD group; a tile row is `GROUPS` groups.
-const LANES: usize = 4;
-const GROUPS: usize = TILE / LANES;
-type Row = [[f32; LANES]; GROUPS];
+/// One tile row per accumulator row; SIMD groups are `V::N` consecutive pixels of it.
+type Row = [f32; TILE];
 
-/// Per-pixel accumulators of one tile, indexed `[row][group][lane]` so that a group is one
-/// 4-lane vector; lives on the stack, reused for every tile of a band.
+/// Per-pixel accumulators of one tile, indexed `[row][column]`; lives on the stack, reused for
+/// every tile of a band. Rows are 64 bytes and aligned so, hence so is every group.
+#[repr(C, align(64))]
 struct TileState {
     transmittance: [Row; TILE],
     red: [Row; TILE],
@@ -165,7 +199,7 @@ struct TileState {
     blue: [Row; TILE],
     depth: [Row; TILE],
     max_weight: [Row; TILE],
-    max_id: [[[u32; LANES]; GROUPS]; TILE],
+    max_id: [[u32; TILE]; TILE],
     /// Per row, bit x is set while pixel x still blends: cleared once it stopped (T would drop
     /// below T_MIN) and never set outside the image.
     live: [u16; TILE],
@@ -174,13 +208,13 @@ struct TileState {
 impl TileState {
     fn new() -> Self {
         Self {
-            transmittance: [[[1.0; LANES]; GROUPS]; TILE],
-            red: [[[0.0; LANES]; GROUPS]; TILE],
-            green: [[[0.0; LANES]; GROUPS]; TILE],
-            blue: [[[0.0; LANES]; GROUPS]; TILE],
-            depth: [[[0.0; LANES]; GROUPS]; TILE],
-            max_weight: [[[0.0; LANES]; GROUPS]; TILE],
-            max_id: [[[NO_GAUSSIAN; LANES]; GROUPS]; TILE],
+            transmittance: [[1.0; TILE]; TILE],
+            red: [[0.0; TILE]; TILE],
+            green: [[0.0; TILE]; TILE],
+            blue: [[0.0; TILE]; TILE],
+            depth: [[0.0; TILE]; TILE],
+            max_weight: [[0.0; TILE]; TILE],
+            max_id: [[NO_GAUSSIAN; TILE]; TILE],
             live: [0; TILE],
         }
     }
@@ -194,20 +228,15 @@ impl TileState {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn render_band<const COLOR: bool, S: Source>(
-    band: Band,
-    width: usize,
-    height: usize,
-    grid_x: usize,
-    source: &S,
-    background: [f32; 3],
-    mask: Option<&TileMask>,
-) {
+/// Blends every tile of `band` (those of the job's mask only, when it has one).
+#[inline(always)] // into `render_band_eight` too, so that the lanes compile for AVX2 there
+fn render_band<const COLOR: bool, V: Lanes, S: Source>(band: Band, job: &BandJob<S>) {
+    let &BandJob { width, height, grid_x, source, background, mask } = job;
     let row0 = band.row0;
     let rows = TILE.min(height - row0);
     let tile_y = row0 / TILE;
     let mut state = TileState::new();
+    let mut fetched = [Splat2D::default(); BATCH];
     for tile_x in 0..grid_x {
         let tile = tile_y * grid_x + tile_x;
         if mask.is_some_and(|m| !m.contains(tile)) {
@@ -220,12 +249,11 @@ fn render_band<const COLOR: bool, S: Source>(
             for batch in list.chunks(BATCH) {
                 // Copy the batch first: the loads are independent, so their cache misses overlap
                 // instead of stalling the blend loop one by one.
-                let mut fetched = [Splat2D::default(); BATCH];
                 for (dst, &id) in fetched.iter_mut().zip(batch) {
                     *dst = source.splat(id);
                 }
                 for (g, &id) in fetched.iter().zip(batch) {
-                    live = live.saturating_sub(blend::<COLOR>(&mut state, g, id, col0, row0));
+                    live = live.saturating_sub(blend::<COLOR, V>(&mut state, g, id, col0, row0));
                     if live == 0 {
                         break 'lists;
                     }
@@ -235,10 +263,9 @@ fn render_band<const COLOR: bool, S: Source>(
         // Write the tile into the band.
         for y in 0..rows {
             for x in 0..cols {
-                let (gi, lane) = (x / LANES, x % LANES);
                 let o = y * width + col0 + x;
-                let t = state.transmittance[y][gi][lane];
-                let id = state.max_id[y][gi][lane];
+                let t = state.transmittance[y][x];
+                let id = state.max_id[y][x];
                 if id == NO_GAUSSIAN {
                     band.index[o] = -1;
                     band.index_depth[o] = 0.0;
@@ -249,8 +276,8 @@ fn render_band<const COLOR: bool, S: Source>(
                 let a = 1.0 - t;
                 band.alpha[o] = a;
                 if COLOR {
-                    band.depth[o] = if a > 0.0 { state.depth[y][gi][lane] / a } else { 0.0 };
-                    let color = [state.red[y][gi][lane], state.green[y][gi][lane], state.blue[y][gi][lane]];
+                    band.depth[o] = if a > 0.0 { state.depth[y][x] / a } else { 0.0 };
+                    let color = [state.red[y][x], state.green[y][x], state.blue[y][x]];
                     for ((out, c), bg) in band.rgb[o * 3..o * 3 + 3].iter_mut().zip(color).zip(background) {
                         *out = c + t * bg;
                     }
@@ -263,12 +290,13 @@ fn render_band<const COLOR: bool, S: Source>(
 /// Blends Gaussian `g` (index `id`) over the live pixels of its box inside the tile
 /// whose top-left pixel is (`col0`, `row0`); returns how many pixels it stopped.
 ///
-/// Four pixels of a row at a time, branch-free within a group; per pixel the decisions and the
+/// `V::N` pixels of a row at a time, branch-free within a group; per pixel the decisions and the
 /// arithmetic are exactly the reference loop's: `power = -0.5 (A dx² + C dy²) - B dx dy`, skip
 /// `power > 0`, `alpha = min(0.99, o exp(power))`, skip `alpha < 1/255`, stop (without blending)
-/// when `T (1 - alpha) < 1e-4`, else `C += c alpha T`, `T *= 1 - alpha`.
-#[inline]
-fn blend<const COLOR: bool>(state: &mut TileState, g: &Splat2D, id: u32, col0: usize, row0: usize) -> usize {
+/// when `T (1 - alpha) < 1e-4`, else `C += c alpha T`, `T *= 1 - alpha`. Every lane does the
+/// same IEEE operations whatever the width, so four and eight lanes give the same bits.
+#[inline(always)]
+fn blend<const COLOR: bool, V: Lanes>(state: &mut TileState, g: &Splat2D, id: u32, col0: usize, row0: usize) -> usize {
     let [bx0, by0, bx1, by1] = g.pixel_box.map(usize::from);
     let x_start = bx0.max(col0) - col0;
     let x_end = (bx1 + 1).min(col0 + TILE).saturating_sub(col0);
@@ -278,57 +306,57 @@ fn blend<const COLOR: bool>(state: &mut TileState, g: &Splat2D, id: u32, col0: u
         return 0;
     }
     let box_bits = (1u32 << x_end) - (1u32 << x_start);
-    let s = F32x4::splat;
+    let group_bits = (1u32 << V::N) - 1;
+    let s = V::splat;
     let [ca, cb, cc] = g.conic;
     let (conic_a, conic_b) = (s(ca), s(cb));
     let (opacity, mean_x, power_floor) = (s(g.opacity), s(g.mean[0]), s(g.power_floor));
     let [red, green, blue] = g.color.map(s);
-    let (z, id_lanes) = (s(g.depth), F32x4::from_bits([id; LANES]));
-    let lane_offsets = F32x4::from_array([0.0, 1.0, 2.0, 3.0]);
+    let (z, id_lanes) = (s(g.depth), V::splat_bits(id));
+    let lane_offsets = V::ramp();
     let mut stopped = 0;
     for y in y_start..y_end {
         let row_bits = box_bits & u32::from(state.live[y]);
         if row_bits == 0 {
             continue;
         }
-        let dy = g.mean[1] - (row0 + y) as f32;
+        let dy = g.mean[1] - (row0 + y) as u32 as f32;
         let (cc_dy2, dy) = (s(cc * dy * dy), s(dy));
-        for gi in x_start / LANES..x_end.div_ceil(LANES) {
-            let bits = (row_bits >> (gi * LANES)) & 0xf;
+        for gi in x_start / V::N..x_end.div_ceil(V::N) {
+            let bits = (row_bits >> (gi * V::N)) & group_bits;
             if bits == 0 {
                 continue;
             }
             // Pixel x is sampled at x (INRIA coordinates, mean already shifted by -0.5).
-            let dx = mean_x - (s((col0 + gi * LANES) as f32) + lane_offsets);
+            let dx = mean_x - (s((col0 + gi * V::N) as u32 as f32) + lane_offsets);
             let power = s(-0.5) * (conic_a * dx * dx + cc_dy2) - conic_b * dx * dy;
-            let lanes = Mask4::from_bits(bits);
+            let lanes = V::Mask::from_bits(bits);
             if lanes.and(power.ge(power_floor)).bits() == 0 {
                 continue; // every lane would get alpha < 1/255: skipped, T untouched
             }
             let alpha = (opacity * power.exp_nonpositive()).min(s(ALPHA_MAX));
             let valid = lanes.and(power.le(s(0.0))).and(alpha.ge(s(ALPHA_MIN)));
-            let t = F32x4::from_array(state.transmittance[y][gi]);
+            let t = V::load(&state.transmittance[y], gi);
             let test_t = t * (s(1.0) - alpha);
             let stop = valid.and(test_t.lt(s(T_MIN)));
             let blended = valid.and_not(stop);
             let weight = blended.keep(alpha * t);
-            state.transmittance[y][gi] = blended.select(test_t, t).to_array();
+            blended.select(test_t, t).store(&mut state.transmittance[y], gi);
             let stop_bits = stop.bits();
             if stop_bits != 0 {
-                state.live[y] &= !((stop_bits << (gi * LANES)) as u16);
+                state.live[y] &= !((stop_bits << (gi * V::N)) as u16);
                 stopped += stop_bits.count_ones() as usize;
             }
-            let max_weight = F32x4::from_array(state.max_weight[y][gi]);
+            let max_weight = V::load(&state.max_weight[y], gi);
             let better = weight.gt(max_weight);
-            state.max_weight[y][gi] = better.select(weight, max_weight).to_array();
-            state.max_id[y][gi] = better.select(id_lanes, F32x4::from_bits(state.max_id[y][gi])).to_bits();
+            better.select(weight, max_weight).store(&mut state.max_weight[y], gi);
+            better.select(id_lanes, V::load_bits(&state.max_id[y], gi)).store_bits(&mut state.max_id[y], gi);
             if COLOR {
-                let add =
-                    |acc: &mut [f32; LANES], value: F32x4| *acc = (F32x4::from_array(*acc) + value * weight).to_array();
-                add(&mut state.red[y][gi], red);
-                add(&mut state.green[y][gi], green);
-                add(&mut state.blue[y][gi], blue);
-                add(&mut state.depth[y][gi], z);
+                let add = |acc: &mut Row, value: V| (V::load(acc, gi) + value * weight).store(acc, gi);
+                add(&mut state.red[y], red);
+                add(&mut state.green[y], green);
+                add(&mut state.blue[y], blue);
+                add(&mut state.depth[y], z);
             }
         }
     }

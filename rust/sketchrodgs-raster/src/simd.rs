@@ -1,13 +1,101 @@
-//! Four f32 lanes: SSE2 on x86_64 (part of its baseline, so always there), plain arrays
-//! elsewhere. Both give bit-identical results: every operation is a single IEEE operation per
-//! lane in the same order, and nothing is fused.
+//! SIMD lanes for blending, behind one trait ([`Lanes`]) so that the blend is written once: four
+//! f32 lanes (SSE2 on x86_64, part of its baseline so always there; plain arrays elsewhere) and,
+//! on x86_64 CPUs that have AVX2, eight ([`F32x8`], picked at run time by [`Simd::detect`]). All
+//! give bit-identical results: every operation is a single IEEE operation per lane in the same
+//! order, and nothing is fused (AVX2 does not include FMA, and Rust never contracts).
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::{
     __m128, __m128i, _mm_add_epi32, _mm_add_ps, _mm_and_ps, _mm_andnot_ps, _mm_castps_si128, _mm_castsi128_ps,
-    _mm_cmpge_ps, _mm_cmpgt_ps, _mm_cmple_ps, _mm_cmplt_ps, _mm_max_ps, _mm_min_ps, _mm_movemask_ps, _mm_mul_ps,
-    _mm_or_ps, _mm_set1_epi32, _mm_set1_ps, _mm_slli_epi32, _mm_sub_epi32, _mm_sub_ps,
+    _mm_cmpeq_epi32, _mm_cmpge_ps, _mm_cmpgt_ps, _mm_cmple_ps, _mm_cmplt_ps, _mm_max_ps, _mm_min_ps, _mm_movemask_ps,
+    _mm_mul_ps, _mm_or_ps, _mm_set1_epi32, _mm_set1_ps, _mm_slli_epi32, _mm_sub_epi32, _mm_sub_ps,
 };
+use std::ops::{Add, Mul, Sub};
+
+/// The lane width blending runs with: chosen once per render from what the CPU has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Simd {
+    /// Four lanes ([`F32x4`]); every CPU.
+    Four,
+    /// Eight lanes ([`F32x8`]); x86_64 with AVX2 only.
+    #[cfg(target_arch = "x86_64")]
+    Eight,
+}
+
+impl Simd {
+    /// The widest lanes this CPU runs.
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Self::Eight;
+        }
+        Self::Four
+    }
+}
+
+/// A vector of `N` f32 lanes, and the few operations blending needs on it. Loads and stores work
+/// on 16-wide rows (a tile row): group `g` is lanes `g * N .. (g + 1) * N`.
+pub trait Lanes: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> {
+    const N: usize;
+    type Mask: LaneMask<Self>;
+    fn splat(v: f32) -> Self;
+    /// `0, 1, .., N - 1`.
+    fn ramp() -> Self;
+    fn load(row: &[f32; 16], group: usize) -> Self;
+    fn store(self, row: &mut [f32; 16], group: usize);
+    /// Four u32 per f32 lane, reinterpreted (for selecting integers with a mask).
+    fn load_bits(row: &[u32; 16], group: usize) -> Self;
+    fn store_bits(self, row: &mut [u32; 16], group: usize);
+    fn splat_bits(v: u32) -> Self;
+    /// Lane-wise minimum; `other` where `self` is NaN (`minps`).
+    fn min(self, other: Self) -> Self;
+    /// Lane-wise maximum; `other` where `self` is NaN (`maxps`).
+    fn max(self, other: Self) -> Self;
+    fn lt(self, other: Self) -> Self::Mask;
+    fn le(self, other: Self) -> Self::Mask;
+    fn ge(self, other: Self) -> Self::Mask;
+    fn gt(self, other: Self) -> Self::Mask;
+    /// `2^k` for the integers `k` held in the low mantissa bits of `self` (see `exp_nonpositive`).
+    fn pow2_from_rounded(self, round_bits: u32) -> Self;
+
+    /// `exp(x)` for `x <= 0` (Cody-Waite reduction and the Cephes `expf` polynomial; relative
+    /// error below 4e-7). Inputs below -80 give about 2e-35, far below any alpha that counts.
+    #[inline(always)]
+    fn exp_nonpositive(self) -> Self {
+        const LOG2E: f32 = std::f32::consts::LOG2_E;
+        const LN2_HI: f32 = 0.693_359_4;
+        const LN2_LO: f32 = -2.121_944_4e-4;
+        // Adding 1.5 * 2^23 rounds to an integer, which then sits in the low mantissa bits.
+        const ROUND: f32 = 12_582_912.0;
+        const POLY: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 0.5];
+        let s = Self::splat;
+        let x = self.max(s(-80.0)).min(s(0.0));
+        let shifted = x * s(LOG2E) + s(ROUND);
+        let n = shifted - s(ROUND);
+        let r = x - n * s(LN2_HI) - n * s(LN2_LO);
+        let mut p = s(POLY[0]);
+        for c in &POLY[1..] {
+            p = p * r + s(*c);
+        }
+        let e_r = p * r * r + r + s(1.0);
+        e_r * shifted.pow2_from_rounded(ROUND.to_bits())
+    }
+}
+
+/// A per-lane mask of a [`Lanes`] (all bits of a lane set or clear).
+pub trait LaneMask<V>: Copy {
+    /// Lanes whose bit is set in `bits` (bit i = lane i).
+    fn from_bits(bits: u32) -> Self;
+    /// Bit i set where lane i is.
+    fn bits(self) -> u32;
+    fn and(self, other: Self) -> Self;
+    /// `self & !other`.
+    fn and_not(self, other: Self) -> Self;
+    /// `a` where set, `b` elsewhere.
+    fn select(self, a: V, b: V) -> V;
+    /// `a` where set, zero elsewhere.
+    fn keep(self, a: V) -> V;
+}
 
 /// Four f32 lanes.
 #[derive(Clone, Copy, Debug)]
@@ -101,6 +189,17 @@ mod sse {
     pub fn bits(mask: __m128) -> u32 {
         unsafe { _mm_movemask_ps(mask) as u32 }
     }
+    #[inline(always)]
+    fn _mm_castsi128_ps_(v: __m128i) -> __m128 {
+        bytemuck::cast(v)
+    }
+    /// All bits of lane i set where bit i of `bits` is.
+    #[inline(always)]
+    pub fn mask_from_bits(bits: u32) -> __m128 {
+        let lane_bits: __m128i = bytemuck::cast([1u32, 2, 4, 8]);
+        let set = and(_mm_castsi128_ps_(unsafe { _mm_set1_epi32(bits as i32) }), _mm_castsi128_ps_(lane_bits));
+        unsafe { _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_castps_si128(set), lane_bits)) }
+    }
     /// `2^k` for the integers `k` held in the low mantissa bits of `shifted` (see `exp`).
     #[inline(always)]
     pub fn pow2_from_rounded(shifted: __m128, round_bits: u32) -> __m128 {
@@ -181,85 +280,76 @@ mod portable {
     pub fn bits(mask: V) -> u32 {
         (0..4).map(|i| (mask[i].to_bits() >> 31) << i).sum()
     }
+    pub fn mask_from_bits(bits: u32) -> V {
+        [0, 1, 2, 3].map(|i| f32::from_bits(if bits >> i & 1 == 1 { u32::MAX } else { 0 }))
+    }
     pub fn pow2_from_rounded(shifted: V, round_bits: u32) -> V {
         shifted.map(|s| f32::from_bits(s.to_bits().wrapping_sub(round_bits).wrapping_add(127) << 23))
     }
 }
 
-impl F32x4 {
+impl Lanes for F32x4 {
+    const N: usize = 4;
+    type Mask = Mask4;
     #[inline(always)]
-    pub fn splat(v: f32) -> Self {
+    fn splat(v: f32) -> Self {
         Self(imp::splat(v))
     }
     #[inline(always)]
-    pub fn from_array(a: [f32; 4]) -> Self {
-        Self(imp::from_array(a))
+    fn ramp() -> Self {
+        Self(imp::from_array([0.0, 1.0, 2.0, 3.0]))
     }
     #[inline(always)]
-    pub fn to_array(self) -> [f32; 4] {
-        imp::to_array(self.0)
-    }
-    /// Reinterprets four u32 as lanes (for selecting integers with a mask).
-    #[inline(always)]
-    pub fn from_bits(a: [u32; 4]) -> Self {
-        Self(imp::from_bits(a))
+    fn load(row: &[f32; 16], group: usize) -> Self {
+        Self(imp::from_array(row.as_chunks::<4>().0[group]))
     }
     #[inline(always)]
-    pub fn to_bits(self) -> [u32; 4] {
-        imp::to_bits(self.0)
+    fn store(self, row: &mut [f32; 16], group: usize) {
+        row.as_chunks_mut::<4>().0[group] = imp::to_array(self.0);
     }
-    /// Lane-wise minimum; `other` where `self` is NaN.
     #[inline(always)]
-    pub fn min(self, other: Self) -> Self {
+    fn load_bits(row: &[u32; 16], group: usize) -> Self {
+        Self(imp::from_bits(row.as_chunks::<4>().0[group]))
+    }
+    #[inline(always)]
+    fn store_bits(self, row: &mut [u32; 16], group: usize) {
+        row.as_chunks_mut::<4>().0[group] = imp::to_bits(self.0);
+    }
+    #[inline(always)]
+    fn splat_bits(v: u32) -> Self {
+        Self(imp::from_bits([v; 4]))
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
         Self(imp::min(self.0, other.0))
     }
-    /// Lane-wise maximum; `other` where `self` is NaN.
     #[inline(always)]
-    pub fn max(self, other: Self) -> Self {
+    fn max(self, other: Self) -> Self {
         Self(imp::max(self.0, other.0))
     }
     #[inline(always)]
-    pub fn lt(self, other: Self) -> Mask4 {
+    fn lt(self, other: Self) -> Mask4 {
         Mask4(Self(imp::lt(self.0, other.0)))
     }
     #[inline(always)]
-    pub fn le(self, other: Self) -> Mask4 {
+    fn le(self, other: Self) -> Mask4 {
         Mask4(Self(imp::le(self.0, other.0)))
     }
     #[inline(always)]
-    pub fn ge(self, other: Self) -> Mask4 {
+    fn ge(self, other: Self) -> Mask4 {
         Mask4(Self(imp::ge(self.0, other.0)))
     }
     #[inline(always)]
-    pub fn gt(self, other: Self) -> Mask4 {
+    fn gt(self, other: Self) -> Mask4 {
         Mask4(Self(imp::gt(self.0, other.0)))
     }
-
-    /// `exp(x)` for `x <= 0` (Cody-Waite reduction and the Cephes `expf` polynomial; relative
-    /// error below 4e-7). Inputs below -80 give about 2e-35, far below any alpha that counts.
     #[inline(always)]
-    pub fn exp_nonpositive(self) -> Self {
-        const LOG2E: f32 = std::f32::consts::LOG2_E;
-        const LN2_HI: f32 = 0.693_359_4;
-        const LN2_LO: f32 = -2.121_944_4e-4;
-        // Adding 1.5 * 2^23 rounds to an integer, which then sits in the low mantissa bits.
-        const ROUND: f32 = 12_582_912.0;
-        const POLY: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 0.5];
-        let s = Self::splat;
-        let x = self.max(s(-80.0)).min(s(0.0));
-        let shifted = x * s(LOG2E) + s(ROUND);
-        let n = shifted - s(ROUND);
-        let r = x - n * s(LN2_HI) - n * s(LN2_LO);
-        let mut p = s(POLY[0]);
-        for c in &POLY[1..] {
-            p = p * r + s(*c);
-        }
-        let e_r = p * r * r + r + s(1.0);
-        e_r * Self(imp::pow2_from_rounded(shifted.0, ROUND.to_bits()))
+    fn pow2_from_rounded(self, round_bits: u32) -> Self {
+        Self(imp::pow2_from_rounded(self.0, round_bits))
     }
 }
 
-impl std::ops::Add for F32x4 {
+impl Add for F32x4 {
     type Output = Self;
     #[inline(always)]
     fn add(self, other: Self) -> Self {
@@ -267,7 +357,7 @@ impl std::ops::Add for F32x4 {
     }
 }
 
-impl std::ops::Sub for F32x4 {
+impl Sub for F32x4 {
     type Output = Self;
     #[inline(always)]
     fn sub(self, other: Self) -> Self {
@@ -275,7 +365,7 @@ impl std::ops::Sub for F32x4 {
     }
 }
 
-impl std::ops::Mul for F32x4 {
+impl Mul for F32x4 {
     type Output = Self;
     #[inline(always)]
     fn mul(self, other: Self) -> Self {
@@ -283,36 +373,198 @@ impl std::ops::Mul for F32x4 {
     }
 }
 
-impl Mask4 {
-    /// Lanes whose bit is set in `bits` (bit i = lane i).
+impl LaneMask<F32x4> for Mask4 {
     #[inline(always)]
-    pub fn from_bits(bits: u32) -> Self {
-        let lane = |i: u32| if bits >> i & 1 == 1 { u32::MAX } else { 0 };
-        Self(F32x4::from_bits([lane(0), lane(1), lane(2), lane(3)]))
+    fn from_bits(bits: u32) -> Self {
+        Self(F32x4(imp::mask_from_bits(bits)))
     }
-    /// Bit i set where lane i is.
     #[inline(always)]
-    pub fn bits(self) -> u32 {
+    fn bits(self) -> u32 {
         imp::bits(self.0.0)
     }
     #[inline(always)]
-    pub fn and(self, other: Self) -> Self {
+    fn and(self, other: Self) -> Self {
         Self(F32x4(imp::and(self.0.0, other.0.0)))
     }
-    /// `self & !other`.
     #[inline(always)]
-    pub fn and_not(self, other: Self) -> Self {
+    fn and_not(self, other: Self) -> Self {
         Self(F32x4(imp::and_not(other.0.0, self.0.0)))
     }
-    /// `a` where set, `b` elsewhere.
     #[inline(always)]
-    pub fn select(self, a: F32x4, b: F32x4) -> F32x4 {
+    fn select(self, a: F32x4, b: F32x4) -> F32x4 {
         F32x4(imp::or(imp::and(self.0.0, a.0), imp::and_not(self.0.0, b.0)))
     }
-    /// `a` where set, zero elsewhere.
     #[inline(always)]
-    pub fn keep(self, a: F32x4) -> F32x4 {
+    fn keep(self, a: F32x4) -> F32x4 {
         F32x4(imp::and(self.0.0, a.0))
+    }
+}
+
+/// Array conversions for the tests.
+#[cfg(test)]
+impl F32x4 {
+    pub fn from_array(a: [f32; 4]) -> Self {
+        Self(imp::from_array(a))
+    }
+    pub fn to_array(self) -> [f32; 4] {
+        imp::to_array(self.0)
+    }
+    pub fn from_bits(a: [u32; 4]) -> Self {
+        Self(imp::from_bits(a))
+    }
+    pub fn to_bits(self) -> [u32; 4] {
+        imp::to_bits(self.0)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub use avx2::F32x8;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    //! Eight lanes on AVX2.
+    //!
+    //! SAFETY, for every `unsafe` block here: each only calls an AVX or AVX2 intrinsic, and these
+    //! types are only ever created inside `composite::render_band_eight`, which runs only where
+    //! `Simd::detect` found AVX2 (`is_x86_feature_detected!("avx2")`), so the instructions exist.
+    //! Loads and stores go through arrays (bytemuck casts), never through raw pointers.
+    use std::arch::x86_64::{
+        __m256, _CMP_GE_OQ, _CMP_GT_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _mm256_add_epi32, _mm256_add_ps, _mm256_and_ps,
+        _mm256_and_si256, _mm256_andnot_ps, _mm256_castps_si256, _mm256_castsi256_ps, _mm256_cmp_ps,
+        _mm256_cmpeq_epi32, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_or_ps,
+        _mm256_set1_epi32, _mm256_set1_ps, _mm256_slli_epi32, _mm256_sub_epi32, _mm256_sub_ps,
+    };
+    use std::ops::{Add, Mul, Sub};
+
+    use super::{LaneMask, Lanes};
+
+    /// Eight f32 lanes.
+    #[derive(Clone, Copy, Debug)]
+    pub struct F32x8(__m256);
+
+    /// A per-lane mask of [`F32x8`].
+    #[derive(Clone, Copy, Debug)]
+    pub struct Mask8(__m256);
+
+    impl Lanes for F32x8 {
+        const N: usize = 8;
+        type Mask = Mask8;
+        #[inline(always)]
+        fn splat(v: f32) -> Self {
+            Self(unsafe { _mm256_set1_ps(v) })
+        }
+        #[inline(always)]
+        fn ramp() -> Self {
+            Self(bytemuck::cast([0.0f32, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]))
+        }
+        #[inline(always)]
+        fn load(row: &[f32; 16], group: usize) -> Self {
+            Self(bytemuck::cast(row.as_chunks::<8>().0[group]))
+        }
+        #[inline(always)]
+        fn store(self, row: &mut [f32; 16], group: usize) {
+            row.as_chunks_mut::<8>().0[group] = bytemuck::cast(self.0);
+        }
+        #[inline(always)]
+        fn load_bits(row: &[u32; 16], group: usize) -> Self {
+            Self(bytemuck::cast(row.as_chunks::<8>().0[group]))
+        }
+        #[inline(always)]
+        fn store_bits(self, row: &mut [u32; 16], group: usize) {
+            row.as_chunks_mut::<8>().0[group] = bytemuck::cast(self.0);
+        }
+        #[inline(always)]
+        fn splat_bits(v: u32) -> Self {
+            Self(unsafe { _mm256_castsi256_ps(_mm256_set1_epi32(v as i32)) })
+        }
+        #[inline(always)]
+        fn min(self, other: Self) -> Self {
+            Self(unsafe { _mm256_min_ps(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn max(self, other: Self) -> Self {
+            Self(unsafe { _mm256_max_ps(self.0, other.0) })
+        }
+        // Ordered, non-signalling predicates: false on NaN, as `cmpltps` and friends.
+        #[inline(always)]
+        fn lt(self, other: Self) -> Mask8 {
+            Mask8(unsafe { _mm256_cmp_ps::<_CMP_LT_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn le(self, other: Self) -> Mask8 {
+            Mask8(unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn ge(self, other: Self) -> Mask8 {
+            Mask8(unsafe { _mm256_cmp_ps::<_CMP_GE_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn gt(self, other: Self) -> Mask8 {
+            Mask8(unsafe { _mm256_cmp_ps::<_CMP_GT_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn pow2_from_rounded(self, round_bits: u32) -> Self {
+            Self(unsafe {
+                let k = _mm256_sub_epi32(_mm256_castps_si256(self.0), _mm256_set1_epi32(round_bits as i32));
+                _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_add_epi32(k, _mm256_set1_epi32(127))))
+            })
+        }
+    }
+
+    impl Add for F32x8 {
+        type Output = Self;
+        #[inline(always)]
+        fn add(self, other: Self) -> Self {
+            Self(unsafe { _mm256_add_ps(self.0, other.0) })
+        }
+    }
+
+    impl Sub for F32x8 {
+        type Output = Self;
+        #[inline(always)]
+        fn sub(self, other: Self) -> Self {
+            Self(unsafe { _mm256_sub_ps(self.0, other.0) })
+        }
+    }
+
+    impl Mul for F32x8 {
+        type Output = Self;
+        #[inline(always)]
+        fn mul(self, other: Self) -> Self {
+            Self(unsafe { _mm256_mul_ps(self.0, other.0) })
+        }
+    }
+
+    impl LaneMask<F32x8> for Mask8 {
+        #[inline(always)]
+        fn from_bits(bits: u32) -> Self {
+            let lane_bits: [u32; 8] = [1, 2, 4, 8, 16, 32, 64, 128];
+            Self(unsafe {
+                let lane_bits = bytemuck::cast(lane_bits);
+                let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bits);
+                _mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bits))
+            })
+        }
+        #[inline(always)]
+        fn bits(self) -> u32 {
+            unsafe { _mm256_movemask_ps(self.0) as u32 }
+        }
+        #[inline(always)]
+        fn and(self, other: Self) -> Self {
+            Self(unsafe { _mm256_and_ps(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn and_not(self, other: Self) -> Self {
+            Self(unsafe { _mm256_andnot_ps(other.0, self.0) })
+        }
+        #[inline(always)]
+        fn select(self, a: F32x8, b: F32x8) -> F32x8 {
+            F32x8(unsafe { _mm256_or_ps(_mm256_and_ps(self.0, a.0), _mm256_andnot_ps(self.0, b.0)) })
+        }
+        #[inline(always)]
+        fn keep(self, a: F32x8) -> F32x8 {
+            F32x8(unsafe { _mm256_and_ps(self.0, a.0) })
+        }
     }
 }
 
@@ -400,9 +652,67 @@ mod tests {
         assert_eq!(lt.select(a, b).to_array(), [1.0, 2.0, 2.5, 2.5]);
         assert_eq!(lt.keep(a).to_array(), [1.0, 2.0, 0.0, 0.0]);
         assert_eq!(Mask4::from_bits(0b1010).bits(), 0b1010);
+        for bits in 0..16 {
+            assert_eq!(Mask4::from_bits(bits).bits(), bits);
+        }
         assert_eq!(Mask4::from_bits(0b0110).and(lt).bits(), 0b0010);
         assert_eq!(Mask4::from_bits(0b0110).and_not(lt).bits(), 0b0100);
         let ints = F32x4::from_bits([7, 8, 9, 10]);
         assert_eq!(lt.select(ints, F32x4::from_bits([0; 4])).to_bits(), [7, 8, 0, 0]);
+    }
+
+    /// Eight AVX2 lanes give what two groups of four give, bit for bit, for every operation
+    /// blending uses (skipped on CPUs without AVX2).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn eight_lanes_match_four_bit_for_bit() {
+        if Simd::detect() != Simd::Eight {
+            return;
+        }
+        let specials = [0.0, -0.0, 1.0, -1.5, 1e-40, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 3.4e38, -87.3];
+        let mut values: Vec<f32> = specials.to_vec();
+        let mut state = 777u32;
+        for _ in 0..1000 {
+            state = state.wrapping_mul(1664525).wrapping_add(1013904223);
+            values.push(f32::from_bits(state) % 1e3);
+            values.push(-((state >> 8) as f32) / 1e5); // exp's range
+        }
+        let row = |v: &[f32]| -> [f32; 16] { std::array::from_fn(|i| v[i % v.len()]) };
+        for (a, b) in values.chunks_exact(16).zip(values.chunks_exact(16).rev()) {
+            let (a, b) = (row(a), row(b));
+            for g in 0..2 {
+                let (a8, b8) = (F32x8::load(&a, g), F32x8::load(&b, g));
+                let (mut wide, mut narrow) = ([0.0f32; 16], [0.0f32; 16]);
+                let mut same = |f8: &dyn Fn(F32x8, F32x8) -> F32x8, f4: &dyn Fn(F32x4, F32x4) -> F32x4| {
+                    f8(a8, b8).store(&mut wide, g);
+                    for h in 0..2 {
+                        f4(F32x4::load(&a, 2 * g + h), F32x4::load(&b, 2 * g + h)).store(&mut narrow, 2 * g + h);
+                    }
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&wide[g * 8..g * 8 + 8]), bits(&narrow[g * 8..g * 8 + 8]));
+                };
+                same(&|x, y| x + y, &|x, y| x + y);
+                same(&|x, y| x - y, &|x, y| x - y);
+                same(&|x, y| x * y, &|x, y| x * y);
+                same(&|x, y| x.min(y), &|x, y| x.min(y));
+                same(&|x, y| x.max(y), &|x, y| x.max(y));
+                same(&|x, _| x.exp_nonpositive(), &|x, _| x.exp_nonpositive());
+                same(&|x, y| x.lt(y).select(x, y), &|x, y| x.lt(y).select(x, y));
+                same(&|x, y| x.le(y).keep(x), &|x, y| x.le(y).keep(x));
+                same(&|x, y| x.ge(y).and_not(y.gt(x)).select(y, x), &|x, y| x.ge(y).and_not(y.gt(x)).select(y, x));
+                let bits8 = a8.lt(b8).bits();
+                let bits4 = F32x4::load(&a, 2 * g).lt(F32x4::load(&b, 2 * g)).bits()
+                    | F32x4::load(&a, 2 * g + 1).lt(F32x4::load(&b, 2 * g + 1)).bits() << 4;
+                assert_eq!(bits8, bits4);
+            }
+        }
+        for bits in 0..256u32 {
+            assert_eq!(<F32x8 as Lanes>::Mask::from_bits(bits).bits(), bits);
+        }
+        let mut ids = [0u32; 16];
+        let ramp: [u32; 16] = std::array::from_fn(|i| i as u32);
+        let lt = F32x8::ramp().lt(F32x8::splat(3.0));
+        lt.select(F32x8::splat_bits(9), F32x8::load_bits(&ramp, 1)).store_bits(&mut ids, 1);
+        assert_eq!(ids[8..], [9, 9, 9, 11, 12, 13, 14, 15]);
     }
 }

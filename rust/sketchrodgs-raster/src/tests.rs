@@ -87,6 +87,41 @@ fn output_is_identical_for_any_thread_count() {
 }
 
 #[test]
+fn four_and_eight_lanes_blend_the_same_bits() {
+    use crate::composite::{Binned, blank, composite_with};
+    use crate::simd::Simd;
+    if Simd::detect() == Simd::Four {
+        return; // nothing to compare against on this CPU
+    }
+    // Gaussians of all sizes, and an image whose width is not a multiple of the tile
+    let mut scene = Scene::random(20_000, 16, 5);
+    scene.scales.iter_mut().step_by(37).for_each(|s| *s *= 15.0);
+    let cam = camera(203, 117);
+    for mode in [RenderMode::Full, RenderMode::IndexOnly] {
+        let options = RenderOptions { background: [0.2, 0.1, 0.4], mode };
+        let projected = project(&scene.splats(), &cam, mode == RenderMode::Full, None);
+        let order = sort_by_depth(&projected.splats, &projected.rects);
+        let bins = TileBins::new(&cam, &projected.rects, &order, None).unwrap();
+        let source = Binned { projected: &projected, bins: &bins };
+        let mut outs = [Simd::Four, Simd::detect()].map(|simd| {
+            let mut out = blank(&cam, &options).unwrap();
+            composite_with(simd, &mut out, &cam, &source, &options, None);
+            out
+        });
+        let [four, eight] = &mut outs;
+        assert_eq!(four.index, eight.index);
+        assert!(four.index.iter().filter(|&&i| i >= 0).count() > 10_000);
+        for (a, b) in [(&four.alpha, &eight.alpha), (&four.rgb, &eight.rgb), (&four.depth, &eight.depth)] {
+            assert_eq!(
+                a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                b.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            );
+        }
+        assert_eq!(four.index_depth, eight.index_depth);
+    }
+}
+
+#[test]
 fn index_only_mode_skips_colour_but_keeps_the_index_and_alpha() {
     let scene = Scene::random(5_000, 4, 2);
     let cam = camera(96, 80);
