@@ -80,6 +80,7 @@ def max_alpha(
     scales: npt.NDArray[np.float32],
     quats: npt.NDArray[np.float32],
     opacities: npt.NDArray[np.float32],
+    rows: npt.NDArray[np.int64],
     origin: tuple[float, float, float] | list[float],
     spacing: float,
     dims: tuple[int, int, int] | list[int],

@@ -91,11 +91,12 @@ def scene_field(
     rows = rows[keep[rows]]
     if len(rows) == 0:
         return None
-    alpha = _core.max_alpha(
-        np.ascontiguousarray(scene.means[rows]),
-        np.ascontiguousarray(scene.scales[rows]),
-        np.ascontiguousarray(scene.quats[rows]),
-        np.ascontiguousarray(scene.opacities[rows]),
+    alpha = _core.max_alpha(  # of the rows in place: no copy of the scene's arrays
+        np.ascontiguousarray(scene.means),
+        np.ascontiguousarray(scene.scales),
+        np.ascontiguousarray(scene.quats),
+        np.ascontiguousarray(scene.opacities),
+        rows.astype(np.int64),
         [float(v) for v in low],
         float(spacing),
         [int(v) for v in dims],
@@ -127,7 +128,7 @@ def _signed_distance(alpha: np.ndarray, solid: np.ndarray) -> np.ndarray:
     its distance to the nearest such node of its side (Euclidean distance transforms).
     """
     described = solid == (alpha >= SOLID_ALPHA)
-    inverse = np.zeros(alpha.shape)  # sum over axes of 1 / (intercept in cells)^2
+    inverse = np.zeros(alpha.shape, np.float32)  # sum over axes of 1 / (intercept in cells)^2
     for axis in range(3):
         first = [slice(None)] * 3
         second = [slice(None)] * 3
@@ -137,14 +138,14 @@ def _signed_distance(alpha: np.ndarray, solid: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t = (SOLID_ALPHA - alpha[a]) / (alpha[b] - alpha[a])  # from node a towards node b
         t = np.where(crossing & described[a] & described[b] & (t >= 0) & (t <= 1), t, 0.5)
-        nearest = np.zeros(alpha.shape)  # the nearest crossing along this axis, either side
+        nearest = np.zeros(alpha.shape, np.float32)  # the nearest crossing along this axis, either side
         nearest[a] = np.where(crossing, 1 / np.maximum(t, 1e-3) ** 2, 0.0)
         nearest[b] = np.maximum(nearest[b], np.where(crossing, 1 / np.maximum(1 - t, 1e-3) ** 2, 0.0))
         inverse += nearest
     band = inverse > 0
-    near = np.zeros(alpha.shape)
+    near = np.zeros(alpha.shape, np.float32)
     near[band] = 1 / np.sqrt(inverse[band])
-    out = np.empty(alpha.shape)
+    out = np.empty(alpha.shape, np.float32)
     for side, sign in ((~solid, 1.0), (solid, -1.0)):
         seeds = band & side
         if not seeds.any():

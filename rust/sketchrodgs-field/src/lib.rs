@@ -31,6 +31,8 @@ pub enum FieldError {
     TooManyCells { dims: [usize; 3], max: usize },
     #[error("{name}: {got} rows but means has {want}")]
     Lengths { name: &'static str, got: usize, want: usize },
+    #[error("row {row} is not one of the {count} Gaussians")]
+    Row { row: usize, count: usize },
 }
 
 /// A regular grid: cell `(i, j, k)` has its centre at `origin + spacing * (i, j, k)`; cells are
@@ -68,17 +70,56 @@ pub fn max_alpha(
     quats: &[[f32; 4]],
     opacities: &[f32],
 ) -> Result<Vec<f32>, FieldError> {
-    let cells = grid.cells()?;
+    check_lengths(means, scales, quats, opacities)?;
+    splat_rows(grid, means, scales, quats, opacities, (0..means.len()).into_par_iter())
+}
+
+/// [`max_alpha`] of the Gaussians `rows` only (of a whole scene's arrays: nothing is copied).
+pub fn max_alpha_of_rows(
+    grid: &Grid,
+    means: &[[f32; 3]],
+    scales: &[[f32; 3]],
+    quats: &[[f32; 4]],
+    opacities: &[f32],
+    rows: &[usize],
+) -> Result<Vec<f32>, FieldError> {
+    check_lengths(means, scales, quats, opacities)?;
+    if let Some(&row) = rows.iter().find(|&&r| r >= means.len()) {
+        return Err(FieldError::Row { row, count: means.len() });
+    }
+    splat_rows(grid, means, scales, quats, opacities, rows.par_iter().copied())
+}
+
+fn check_lengths(
+    means: &[[f32; 3]],
+    scales: &[[f32; 3]],
+    quats: &[[f32; 4]],
+    opacities: &[f32],
+) -> Result<(), FieldError> {
     for (name, got) in [("scales", scales.len()), ("quats", quats.len()), ("opacities", opacities.len())] {
         if got != means.len() {
             return Err(FieldError::Lengths { name, got, want: means.len() });
         }
     }
+    Ok(())
+}
+
+/// Every row's Gaussian splatted into the grid, in parallel (each thread its own grid, merged by
+/// maximum).
+fn splat_rows(
+    grid: &Grid,
+    means: &[[f32; 3]],
+    scales: &[[f32; 3]],
+    quats: &[[f32; 4]],
+    opacities: &[f32],
+    rows: impl IndexedParallelIterator<Item = usize>,
+) -> Result<Vec<f32>, FieldError> {
+    let cells = grid.cells()?;
     let splat = |mut alpha: Vec<f32>, g: usize| {
         splat_one(grid, means[g], scales[g], quats[g], opacities[g], &mut alpha);
         alpha
     };
-    Ok((0..means.len()).into_par_iter().with_min_len(4096).fold(|| vec![0.0f32; cells], splat).reduce(
+    Ok(rows.with_min_len(4096).fold(|| vec![0.0f32; cells], splat).reduce(
         || vec![0.0f32; cells],
         |mut a, b| {
             a.iter_mut().zip(b).for_each(|(x, y)| *x = x.max(y));
@@ -183,6 +224,10 @@ mod tests {
         assert!(matches!(one(&Grid { origin: [f64::NAN, 0.0, 0.0], ..ok }), Err(FieldError::Origin(_))));
         assert!(matches!(one(&Grid { dims: [1 << 20, 1 << 20, 2], ..ok }), Err(FieldError::TooManyCells { .. })));
         assert!(matches!(max_alpha(&ok, &[[0.0; 3]], &[], &[], &[]), Err(FieldError::Lengths { .. })));
+        let (m, s, q, o) = ([[0.0f32; 3]], [[1.0f32; 3]], [[1.0f32, 0.0, 0.0, 0.0]], [1.0f32]);
+        assert!(matches!(max_alpha_of_rows(&ok, &m, &s, &q, &o, &[1]), Err(FieldError::Row { row: 1, .. })));
+        assert_eq!(max_alpha_of_rows(&ok, &m, &s, &q, &o, &[0]).unwrap(), max_alpha(&ok, &m, &s, &q, &o).unwrap());
+        assert!(max_alpha_of_rows(&ok, &m, &s, &q, &o, &[]).unwrap().iter().all(|&a| a == 0.0));
         // a NaN Gaussian is skipped, not spread
         let alpha = max_alpha(&ok, &[[f32::NAN; 3]], &[[1.0; 3]], &[[1.0, 0.0, 0.0, 0.0]], &[1.0]).unwrap();
         assert!(alpha.iter().all(|&a| a == 0.0));

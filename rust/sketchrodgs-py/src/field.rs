@@ -9,8 +9,8 @@ use crate::errors::SketchRodGSError;
 use crate::pool::run_parallel;
 
 /// Per cell of the grid (`dims` (nx, ny, nz) cells with centres at `origin + spacing * (i, j, k)`),
-/// the largest opacity the Gaussians (means, scales (N, 3), quats (N, 4) wxyz, opacities (N,),
-/// float32) reach at its centre: (nx * ny * nz,) float32, x fastest.
+/// the largest opacity the Gaussians `rows` (int64) of a scene (means, scales (N, 3), quats (N, 4)
+/// wxyz, opacities (N,), float32) reach at its centre: (nx * ny * nz,) float32, x fastest.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn max_alpha<'py>(
@@ -19,6 +19,7 @@ fn max_alpha<'py>(
     scales: &Bound<'py, PyArray2<f32>>,
     quats: &Bound<'py, PyArray2<f32>>,
     opacities: &Bound<'py, PyArray1<f32>>,
+    rows: &Bound<'py, PyArray1<i64>>,
     origin: [f64; 3],
     spacing: f64,
     dims: [usize; 3],
@@ -32,9 +33,16 @@ fn max_alpha<'py>(
     let scales: &[[f32; 3]] = as_rows(contiguous(&scales, "scales")?);
     let quats: &[[f32; 4]] = as_rows(contiguous(&quats, "quats")?);
     let opacities = contiguous(&opacities, "opacities")?;
+    let rows = rows.try_readonly()?;
+    let rows: Vec<usize> = contiguous(&rows, "rows")?
+        .iter()
+        .map(|&r| usize::try_from(r).map_err(|_| SketchRodGSError::new_err(format!("rows: {r} is negative"))))
+        .collect::<PyResult<_>>()?;
     let grid = Grid { origin, spacing, dims };
-    let alpha = run_parallel(py, "max_alpha", || sketchrodgs_field::max_alpha(&grid, means, scales, quats, opacities))?
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let alpha = run_parallel(py, "max_alpha", || {
+        sketchrodgs_field::max_alpha_of_rows(&grid, means, scales, quats, opacities, &rows)
+    })?
+    .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
     Ok(alpha.into_pyarray(py))
 }
 
