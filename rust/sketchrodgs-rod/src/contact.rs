@@ -380,6 +380,14 @@ impl CapsuleTree {
     }
 }
 
+/// The largest distance of the vectors `v` from the centre of their bounding box: each pair of them
+/// differs by at most twice this.
+pub(crate) fn spread(v: impl Iterator<Item = DVec3> + Clone) -> f64 {
+    let (low, high) = v.clone().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), d| (l.min(d), h.max(d)));
+    let centre = 0.5 * (low + high);
+    v.map(|d| d.distance(centre)).fold(0.0, f64::max)
+}
+
 /// What one rod touches during a step.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Obstacles {
@@ -395,6 +403,8 @@ pub(crate) struct Obstacles {
     /// far, the rod cannot touch itself and its own edges need not be searched.
     pub own_start: Vec<DVec3>,
     pub own_clearance: f64,
+    /// The radius the clearance was measured with.
+    pub own_radius: f64,
 }
 
 /// One penetration: its depth (> 0) and the gradient of the distance it is measured by (the
@@ -418,13 +428,14 @@ impl Obstacles {
         !self.own.is_empty() && 2.0 * moved >= self.own_clearance
     }
 
-    /// How far the vertices `x` are from where they were at the start of the step (infinite when
-    /// that is not known).
+    /// How far the vertices `x` moved from where they were at the start of the step, apart from a
+    /// shift they share (infinite when that is not known): two of them came closer by at most
+    /// twice this.
     pub fn moved(&self, x: &[DVec3]) -> f64 {
         if self.own_start.len() != x.len() {
             return f64::INFINITY;
         }
-        x.iter().zip(&self.own_start).map(|(p, q)| p.distance(*q)).fold(0.0, f64::max)
+        spread(x.iter().zip(&self.own_start).map(|(p, q)| *p - *q))
     }
 
     /// The penetration depths alone of a contact point (as [`Self::each_push`]), for energies.
@@ -512,6 +523,14 @@ mod tests {
         }
         let gap = capsules(&points, r).clearance(5, 4.0 * r);
         assert!(brute < r && (gap - brute).abs() < 1e-12, "{gap} {brute}");
+    }
+
+    #[test]
+    fn the_spread_of_displacements_ignores_a_shared_shift() {
+        let shift = DVec3::new(3.0, -2.0, 1.0);
+        assert_eq!(spread([shift, shift, shift].into_iter()), 0.0); // moved together: cannot meet
+        let (a, b) = (shift, shift + DVec3::new(0.4, 0.0, 0.3));
+        assert!((spread([a, b, 0.5 * (a + b)].into_iter()) - 0.25).abs() < 1e-12); // half of |a - b|
     }
 
     #[test]

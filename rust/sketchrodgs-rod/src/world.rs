@@ -9,6 +9,10 @@ use crate::{DistanceField, ElasticRod, RodError, SolverSettings, StepReport};
 /// need not search them for self-contact until a vertex has moved half that far.
 const CLEARANCE_RADII: f64 = 4.0;
 
+/// A rod's clearance is carried over from its last step (less what it moved since) while at least
+/// this many radii remain; below, it is measured again.
+const KEEP_CLEARANCE_RADII: f64 = 1.0;
+
 /// Rounds of [`World::separate_rods`] over all edge pairs.
 const SEPARATION_ROUNDS: usize = 4;
 
@@ -127,7 +131,7 @@ impl World {
             let mut moved = false;
             for i in 0..self.rods.len() {
                 for j in i..self.rods.len() {
-                    if self.separate_pair(i, j, h) {
+                    if (i != j || self.rods[i].may_touch_itself()) && self.separate_pair(i, j, h) {
                         (moved, nudged[i], nudged[j]) = (true, true, true);
                     }
                 }
@@ -205,8 +209,15 @@ impl World {
                     obstacles.own = CapsuleTree::new(other.capsules());
                     obstacles.own_skip = other.own_skip();
                     obstacles.own_start = other.positions().to_vec();
-                    let cap = CLEARANCE_RADII * other.params().radius;
-                    obstacles.own_clearance = obstacles.own.clearance(obstacles.own_skip, cap);
+                    let r = other.params().radius;
+                    obstacles.own_radius = r;
+                    // the last step's clearance, less what the rod has moved since, while that
+                    // still says much (a lower bound: the far edges came closer by at most that)
+                    let kept = other.clearance_since_last_step(obstacles.own_skip);
+                    obstacles.own_clearance = match kept {
+                        Some(c) if c >= KEEP_CLEARANCE_RADII * r => c,
+                        _ => obstacles.own.clearance(obstacles.own_skip, CLEARANCE_RADII * r),
+                    };
                 } else {
                     others.extend(other.capsules());
                 }

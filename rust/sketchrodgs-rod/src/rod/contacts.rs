@@ -38,6 +38,22 @@ impl ElasticRod {
         self.obstacles = obstacles;
     }
 
+    /// Whether the rod, where it is now, may touch itself: its far edges were further apart at the
+    /// start of the step than it has moved since (`Obstacles::may_touch_itself`).
+    pub(crate) fn may_touch_itself(&self) -> bool {
+        self.obstacles.may_touch_itself(self.obstacles.moved(&self.state.x))
+    }
+
+    /// A lower bound on the clearance of the rod's far edges now (`CapsuleTree::clearance`): the
+    /// one measured at the start of the last step, less twice how far it has moved since; None
+    /// when there was none (or it counted other neighbours, or another radius).
+    pub(crate) fn clearance_since_last_step(&self, skip: usize) -> Option<f64> {
+        let o = &self.obstacles;
+        let same = o.own_skip == skip && o.own_radius == self.params.radius;
+        (same && !o.own.is_empty() && o.own_start.len() == self.state.x.len())
+            .then(|| (o.own_clearance - 2.0 * o.moved(&self.state.x)).max(0.0))
+    }
+
     /// The rod's edges as capsules of its radius, where they are now.
     pub(crate) fn capsules(&self) -> Vec<crate::Capsule> {
         let r = self.params.radius;
@@ -130,7 +146,7 @@ impl ElasticRod {
         }
         let r = self.params.radius;
         let motion = |i: usize| DVec3::new(dir[dof_x(i)], dir[dof_x(i) + 1], dir[dof_x(i) + 2]);
-        let farthest = (0..x.len()).map(|i| motion(i).length()).fold(0.0, f64::max);
+        let farthest = crate::contact::spread((0..x.len()).map(motion));
         let own = self.obstacles.may_touch_itself(self.obstacles.moved(x) + farthest);
         let mut limit: f64 = 1.0;
         self.each_contact_point(x, |p, edge, weights, scene| {
