@@ -19,7 +19,7 @@
 //! * Grab: a hard constraint that puts the vertex exactly on the target. A spring would have to
 //!   be far stiffer than `EA / h` to follow the cursor, which would dominate the Hessian; the
 //!   constraint needs no stiffness and removes three unknowns instead.
-//! * Contact ([`contact`], docs/contact.md): a stiff penalty against a signed distance field of
+//! * Contact (docs/contact.md): a stiff penalty against a signed distance field of
 //!   the scene ([`DistanceField`], [`World::set_field`]) and against the capsules of other rods
 //!   and of a rod's own far edges; the grab gives way to the scene ([`ContactSettings`]).
 //! * Gravity that keeps the captured shape: [`ElasticRod::hold_under_gravity`] solves the rest
