@@ -23,6 +23,7 @@ import numpy as np
 from .contact import SceneField, scene_field
 from .errors import SimulationError, SketchRodGSError
 from .extract import Extraction
+from .framing import AXES
 from .polyline import arc_lengths, polyline_length
 from .rig import DEFAULT_END_RAMP, Rig
 from .rod import ContactSettings, Rod, RodParams, World
@@ -37,9 +38,6 @@ CLAMPS: tuple[str, ...] = get_args(Clamp)
 _CLAMPED_ENDS = {"both": (0, -1), "start": (0,), "end": (-1,), "none": ()}
 
 
-_AXES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0), "+z": (0, 0, 1), "-z": (0, 0, -1)}
-
-
 def _gravity(up: str | Sequence[float] | np.ndarray | None, magnitude: float) -> tuple[float, float, float] | None:
     """The gravity vector for a scene whose up direction is `up` (None: no gravity)."""
     if up is None:
@@ -47,9 +45,9 @@ def _gravity(up: str | Sequence[float] | np.ndarray | None, magnitude: float) ->
     if not (np.isfinite(magnitude) and magnitude >= 0):
         raise SketchRodGSError(f"gravity: must be finite and >= 0, got {magnitude}")
     if isinstance(up, str):
-        if up not in _AXES:
-            raise SketchRodGSError(f"up: expected one of {', '.join(_AXES)} or a vector, got {up!r}")
-        vector = np.array(_AXES[up], np.float64)
+        if up not in AXES:
+            raise SketchRodGSError(f"up: expected one of {', '.join(AXES)} or a vector, got {up!r}")
+        vector = np.array(AXES[up], np.float64)
     else:
         vector = np.asarray(up, np.float64).ravel()
         if vector.shape != (3,) or not np.isfinite(vector).all() or not np.linalg.norm(vector) > 0:

@@ -62,6 +62,11 @@ class Up:
     source: str
     reason: str
 
+    @property
+    def known(self) -> bool:
+        """Given or from cameras, not guessed from the shape: enough to turn gravity on."""
+        return self.source != "guess"
+
 
 def nearest_axis(vector: npt.ArrayLike) -> str:
     """The name in AXES of the axis direction nearest to `vector`."""

@@ -103,6 +103,21 @@ def positive(value: str) -> float:
     return number
 
 
+def in_range(low: float, high: float, what: str = "a number") -> Callable[[str], float]:
+    """A number in low..high (`what` names it in the message: "a number of seconds")."""
+
+    def parse(value: str) -> float:
+        try:
+            number = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {value!r}") from None
+        if not low <= number <= high:
+            raise argparse.ArgumentTypeError(f"must be in {low:g}..{high:g}, got {value}")
+        return number
+
+    return parse
+
+
 def pixels(value: str) -> int:
     """An image side in pixels (>= 1)."""
     try:

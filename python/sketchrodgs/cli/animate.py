@@ -271,4 +271,4 @@ def _gravity_up(args: argparse.Namespace, scene: GaussianScene) -> Up | None:
         return None
     found = training_cameras(args.scene)
     up = scene_up(scene, load_cameras(found) if found else [], args.up)
-    return None if up.source == "guess" else up
+    return up if up.known else None

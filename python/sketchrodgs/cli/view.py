@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._args import scene_help, scene_path
+from ._args import in_range, scene_help, scene_path
 from ._framing import UP_CHOICES
 
 NAME = "view"
@@ -19,26 +19,6 @@ def _port(value: str) -> int:
     if not 0 < port < 65536:
         raise argparse.ArgumentTypeError(f"port must be in 1..65535, got {port}")
     return port
-
-
-def _fps(value: str) -> float:
-    try:
-        fps = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
-    if not 1 <= fps <= 240:
-        raise argparse.ArgumentTypeError(f"fps must be in 1..240, got {value}")
-    return fps
-
-
-def _seconds(value: str) -> float:
-    try:
-        seconds = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {value!r}") from None
-    if not 0.05 <= seconds <= 60:
-        raise argparse.ArgumentTypeError(f"must be in 0.05..60 seconds, got {value}")
-    return seconds
 
 
 def _origin(value: str) -> str:
@@ -94,7 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "-o", "--output-dir", default=".", metavar="DIR", help="where exports, rods and screenshots go (default .)"
     )
-    parser.add_argument("--fps", type=_fps, default=60.0, help="simulation frames per second (default 60)")
+    parser.add_argument("--fps", type=in_range(1, 240), default=60.0, help="simulation frames per second (default 60)")
     parser.add_argument(
         "--splat-update",
         choices=("auto", "exact", "segments"),
@@ -110,7 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--swing-period",
-        type=_seconds,
+        type=in_range(0.05, 60, "a number of seconds"),
         default=0.5,
         metavar="S",
         help="seconds one swing of a let-go rod takes (default 0.5); each rod's stiffness follows from it",
@@ -176,8 +156,7 @@ def run(args: argparse.Namespace) -> int:
     saved = loaded[0][1] if loaded else {}
     default = Material()
     # gravity on where the up direction is known (given, or the training cameras'), not guessed
-    known = up.source != "guess"
-    down = [-GRAVITY * v for v in AXES[up.axis]] if known else default.gravity
+    down = [-GRAVITY * v for v in AXES[up.axis]] if up.known else default.gravity
     g = [float(v) for v in saved.get("gravity", down)]
     material = Material(
         swing_period=args.swing_period,

@@ -29,7 +29,7 @@ import viser
 from ..camera import Camera
 from ..errors import SketchRodGSError
 from ..extract import Extraction
-from ..framing import frame_scene
+from ..framing import AXES, frame_scene
 from ..images import save_png
 from ..io import save_scene
 from ..scene import GaussianScene
@@ -48,14 +48,7 @@ from .tabs import MODES, Tab, Tabs
 
 logger = logging.getLogger("sketchrodgs")
 
-UP_DIRECTIONS = {
-    "+x": (1.0, 0.0, 0.0),
-    "-x": (-1.0, 0.0, 0.0),
-    "+y": (0.0, 1.0, 0.0),
-    "-y": (0.0, -1.0, 0.0),
-    "+z": (0.0, 0.0, 1.0),
-    "-z": (0.0, 0.0, -1.0),
-}
+UP_DIRECTIONS = AXES  # the scene's up, named as everywhere else
 # Up to this many Gaussians the rods' Gaussians are re-sent exactly every frame; above it they
 # move as per-segment nodes, so that the browser need not re-merge a large scene 60 times a
 # second (measured in benches/bench_viewer.py).

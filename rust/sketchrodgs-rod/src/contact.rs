@@ -399,8 +399,9 @@ pub(crate) struct Obstacles {
     /// Own edges within this many edges of a contact point's edge are its neighbours, not obstacles.
     pub own_skip: usize,
     /// Where the rod's vertices were at the start of the step, and how much further apart than
-    /// touching its non-neighbouring edges were then (capped): while no vertex has moved half that
-    /// far, the rod cannot touch itself and its own edges need not be searched.
+    /// touching its non-neighbouring edges were then (capped): while its vertices have not moved
+    /// apart by that much ([`Self::moved`]), the rod cannot touch itself and its own edges need
+    /// not be searched.
     pub own_start: Vec<DVec3>,
     pub own_clearance: f64,
     /// The radius the clearance was measured with.
