@@ -622,9 +622,14 @@ def test_app_simulates_and_exports_split_needles(tmp_path, plant):
         nodes = app.display._rods[entry.id]
         assert len(nodes.splats[0].buffer) == len(entry.gaussian_ids)  # pieces included
         vertex = entry.rod.num_vertices // 2
-        app.rods.grab(entry.id, vertex, np.asarray(entry.rod.positions[vertex]) + [0, 0, 0.03])
+        with app.rods.lock:  # the simulation thread steps the rods under it
+            rest = np.asarray(entry.rod.rest_positions[vertex])
+        app.rods.grab(entry.id, vertex, rest + [0, 0, 0.03])
         deadline = time.monotonic() + 10
-        while np.abs(entry.rod.positions[vertex] - entry.rod.rest_positions[vertex]).max() < 0.02:
+        while True:
+            with app.rods.lock:
+                if np.abs(entry.rod.positions[vertex] - rest).max() >= 0.02:
+                    break
             assert time.monotonic() < deadline, "the simulation thread did not move the rod"
             time.sleep(0.02)
         assert np.abs(load_any(app.export_ply()).means[: len(scene)] - scene.means).max() > 0.01

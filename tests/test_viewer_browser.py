@@ -64,6 +64,12 @@ def wait_for(condition: Callable[[], object], timeout: float, what: str, interva
     raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
 
 
+def positions(app: ViewerApp, entry) -> np.ndarray:
+    """The rod's vertices, read under the rod set's lock as the simulation thread steps them."""
+    with app.rods.lock:
+        return np.asarray(entry.rod.positions)
+
+
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -219,7 +225,8 @@ def test_sketch_pull_release_and_undo(session):
     assert mode_shown(page) == "Play"
     time.sleep(0.5)  # let the handles appear
     before = ring_mask(page)
-    rest = np.asarray(entry.rod.rest_positions)
+    with app.rods.lock:  # the simulation thread steps the rods under it
+        rest = np.asarray(entry.rod.rest_positions)
     shown = app.display.shown_handles(entry.id)
     vertex = int(shown[len(shown) // 2])
     start = to_page(page, client_camera(client, 960), rest[vertex : vertex + 1])[0]
@@ -230,24 +237,24 @@ def test_sketch_pull_release_and_undo(session):
         time.sleep(0.06)
     try:
         wait_for(
-            lambda: np.asarray(entry.rod.positions)[vertex, 1] - rest[vertex, 1] > 0.05,
+            lambda: positions(app, entry)[vertex, 1] - rest[vertex, 1] > 0.05,
             10,
             "the grabbed vertex to follow the pointer",
         )
         time.sleep(0.5)
-        assert np.abs(np.asarray(entry.rod.positions)[[0, -1]] - rest[[0, -1]]).max() < 1e-6  # clamped ends
+        assert np.abs(positions(app, entry)[[0, -1]] - rest[[0, -1]]).max() < 1e-6  # clamped ends
         pulled = ring_mask(page)
     finally:
         page.mouse.up()
     changed = (pulled ^ before).sum()
     assert changed > 300, changed  # the user sees the ring bend
 
-    pulled_by = np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex])
+    pulled_by = np.linalg.norm(positions(app, entry)[vertex] - rest[vertex])
     time.sleep(1.0)  # it swings back (and on, about its rest shape, a few times)
-    assert np.linalg.norm(np.asarray(entry.rod.positions)[vertex] - rest[vertex]) < 0.6 * pulled_by
+    assert np.linalg.norm(positions(app, entry)[vertex] - rest[vertex]) < 0.6 * pulled_by
     page.keyboard.press("r")  # every rod back to rest
     wait_for(lambda: not app.rods.awake, 5, "the rod to rest")
-    assert np.abs(np.asarray(entry.rod.positions) - rest).max() < 1e-6
+    assert np.abs(positions(app, entry) - rest).max() < 1e-6
     time.sleep(0.3)
     assert (ring_mask(page) ^ before).sum() < 0.3 * changed  # the user sees the ring as it was
 
