@@ -346,6 +346,40 @@ def test_rods_in_one_world_that_do_not_touch_step_together_as_if_alone():
         _ = a.positions
 
 
+def test_a_rod_is_the_worlds_own_handle_taking_lists_and_naming_bad_input():
+    from sketchrodgs import _core
+
+    world = World()
+    first, rod, last = (world.add(straight(n)) for n in (5, 7, 9))
+    assert isinstance(rod, _core.Rod) and rod.world is world and [r.index for r in world.rods] == [0, 1, 2]
+    world.remove(first)
+    assert (rod.index, last.index, len(world)) == (0, 1, 2)
+    # array-likes in, vertices counted from either end
+    rod.clamp(-7)
+    rod.grab(-1, [0.5, 0.1, 0.0])
+    assert rod.grabbed is not None and rod.grabbed[0] == 6
+    np.testing.assert_array_equal(rod.grabbed[1], [0.5, 0.1, 0.0])
+    rod.transform([[1, 0, 0], [0, 1, 0], [0, 0, 1]], (0, 0, 1))
+    assert rod.boundaries[0] == "clamped" and rod.rest_positions.shape == (7, 3)
+    rod.set_velocities(np.zeros((7, 3), np.float32).tolist())
+    for call, message in (
+        (lambda: rod.grab(7, (0, 0, 0)), "vertex 7 is out of range for a rod of 7 vertices"),
+        (lambda: rod.move_grab((0, 0)), r"target: expected 3 values, got shape \(2,\)"),
+        (lambda: rod.transform(np.eye(4)), r"rotation: expected a \(3, 3\) rotation matrix, got shape \(4, 4\)"),
+        (lambda: rod.set_positions(np.zeros((7, 2))), r"positions: expected shape \(N, 3\), got \(7, 2\)"),
+        (lambda: rod.pin(1, "here"), "position: expected an array of numbers"),
+        (lambda: Rod([[0, 0, 0], [1, 0]]), "polyline: expected"),
+    ):
+        with pytest.raises(SimulationError, match=message):
+            call()
+    world.remove(rod)
+    assert "detached" in repr(rod)
+    for call in (lambda: rod.positions, lambda: rod.index, lambda: rod.clamp(0), lambda: world.remove(rod)):
+        with pytest.raises(SimulationError, match="removed from its world"):
+            call()
+    assert last.index == 0 and len(world) == 1 and last.positions.shape == (9, 3)
+
+
 def test_frames_are_rotations_with_the_tangent_third_and_vertex_frames_average_them():
     rod = Rod(helix(25))
     rod.clamp(0)
@@ -400,7 +434,7 @@ def test_the_defaults_are_the_rod_crates():
     assert SolverSettings().to_dict() == _core.default_solver_settings()
     rod = Rod(straight(5))
     assert rod.params == RodParams()
-    on_the_rust_side = rod.world._core.params(rod.index)
+    on_the_rust_side = rod._material()
     assert (
         on_the_rust_side["youngs_modulus"] == RodParams().youngs_modulus
         and on_the_rust_side["radius"] == RodParams().radius

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import asdict, dataclass, fields
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -48,8 +48,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger("sketchrodgs")
-
-BoundaryKind = Literal["free", "pinned", "clamped"]
 
 
 @dataclass(frozen=True)
@@ -172,7 +170,10 @@ class RodEnergy:
 
 
 def _points(a: npt.ArrayLike, name: str) -> np.ndarray:
-    arr = np.ascontiguousarray(a, dtype=np.float64)
+    try:
+        arr = np.ascontiguousarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SimulationError(f"{name}: expected an (N, 3) array of numbers") from None
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise SimulationError(f"{name}: expected shape (N, 3), got {arr.shape}")
     return arr
@@ -195,15 +196,6 @@ def _vec3(v: npt.ArrayLike, name: str) -> tuple[float, float, float]:
     if arr.shape != (3,):
         raise SimulationError(f"{name}: expected 3 values, got shape {np.shape(v)}")
     return (float(arr[0]), float(arr[1]), float(arr[2]))
-
-
-def _rotation(r: npt.ArrayLike | None, name: str) -> np.ndarray:
-    if r is None:
-        return np.eye(3)
-    arr = np.ascontiguousarray(r, dtype=np.float64)
-    if arr.shape != (3, 3):
-        raise SimulationError(f"{name}: expected a (3, 3) rotation matrix, got shape {arr.shape}")
-    return arr
 
 
 def merge_coincident(polyline: npt.ArrayLike, tol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -287,7 +279,8 @@ class World:
     """
 
     def __init__(self, solver: SolverSettings | None = None) -> None:
-        self._core = _OneThreadAtATime(_core.RodWorld())
+        self._raw = _core.RodWorld()
+        self._core = _OneThreadAtATime(self._raw)
         self._rods: list[Rod] = []
         if solver is not None:
             self.solver = solver
@@ -346,12 +339,8 @@ class World:
 
     def remove(self, rod: Rod) -> None:
         """Removes `rod` from the world (its handle is then detached)."""
-        k = self._rods.index(rod)
-        self._core.remove_rod(k)
-        self._rods.pop(k)
-        for j, r in enumerate(self._rods):
-            r._index = j
-        rod._index = None
+        self._core.remove(rod)
+        self._rods.remove(rod)
 
     def step(self, dt: float, n: int = 1) -> list[StepReport]:
         """Advances every rod by `dt` seconds, `n` times (GIL released).
@@ -370,8 +359,13 @@ class World:
         return reports
 
 
-class Rod:
+class Rod(_core.Rod):
     """A discrete elastic rod built from a polyline (its rest, natural shape).
+
+    The rod lives in its world's solver; this handle holds the world and the rod's identity, so it
+    stays valid while other rods are added to or removed from the world. Its methods (clamps,
+    pins, grabs, state) are the Rust core's (`_core.Rod`), documented there; the reports of the
+    solves are wrapped here. Vertices may be given negative, counting from the end.
 
     Args:
         polyline: (N, 3) vertex positions [m], N >= 2, no zero-length edges (see
@@ -385,14 +379,17 @@ class Rod:
         SimulationError: bad polyline (shape, NaN, zero-length edge, fold-back) or parameters.
     """
 
-    def __init__(
-        self,
+    _world: World
+    _params: RodParams
+
+    def __new__(
+        cls,
         polyline: npt.ArrayLike,
         *,
         params: RodParams | None = None,
         world: World | None = None,
         **material: Any,
-    ) -> None:
+    ) -> Rod:
         if params is None:
             unknown = set(material) - set(RodParams.__dataclass_fields__)
             if unknown:
@@ -400,9 +397,11 @@ class Rod:
             params = RodParams(**material)
         elif material:
             raise SimulationError("give the material either as params=RodParams(...) or as keywords, not both")
-        self._world = world if world is not None else World()
+        world = world if world is not None else World()
         p = params
-        self._index: int | None = self._world._core.add_rod(
+        rod = super().__new__(
+            cls,
+            world._raw,
             _rod_points(polyline),
             float(p.radius),
             float(p.youngs_modulus),
@@ -412,110 +411,20 @@ class Rod:
             float(p.damping),
             _vec3(p.gravity, "gravity"),
         )
-        self._world._rods.append(self)
-        self._params = p
-        self._n = int(self._world._core.num_vertices(self._index))
+        rod._world, rod._params = world, p
+        world._rods.append(rod)
+        return rod
 
-    # ----- identity -----
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        pass  # made in __new__
 
     @property
     def world(self) -> World:
         return self._world
 
     @property
-    def index(self) -> int:
-        """Index of the rod in its world."""
-        if self._index is None:
-            raise SimulationError("this rod was removed from its world")
-        return self._index
-
-    @property
     def params(self) -> RodParams:
         return self._params
-
-    def __len__(self) -> int:
-        return self._n
-
-    @property
-    def num_vertices(self) -> int:
-        return self._n
-
-    def _vertex(self, v: int) -> int:
-        v = int(v)
-        if not -self._n <= v < self._n:
-            raise SimulationError(f"vertex {v} is out of range for a rod of {self._n} vertices")
-        return v % self._n
-
-    # ----- boundary conditions and interaction -----
-
-    def clamp(self, vertex: int) -> None:
-        """Holds `vertex`'s position and frame where they are (both ends: the app's default)."""
-        self.world._core.set_boundary(self.index, self._vertex(vertex), "clamped")
-
-    def pin(self, vertex: int, position: npt.ArrayLike | None = None) -> None:
-        """Holds `vertex`'s position (at `position` if given, reached over the next step)."""
-        v = self._vertex(vertex)
-        if position is None:
-            self.world._core.set_boundary(self.index, v, "pinned")
-        else:
-            self.world._core.pin_at(self.index, v, _vec3(position, "position"))
-
-    def free(self, vertex: int) -> None:
-        """Removes any pin or clamp of `vertex`."""
-        self.world._core.set_boundary(self.index, self._vertex(vertex), "free")
-
-    def set_boundary(self, vertex: int, kind: BoundaryKind) -> None:
-        self.world._core.set_boundary(self.index, self._vertex(vertex), kind)
-
-    @property
-    def boundaries(self) -> list[str]:
-        """Per vertex: "free", "pinned" or "clamped"."""
-        return list(self.world._core.boundaries(self.index))
-
-    def move_clamp(
-        self, vertex: int, rotation: npt.ArrayLike | None = None, translation: npt.ArrayLike = (0.0, 0.0, 0.0)
-    ) -> None:
-        """Moves the clamp of `vertex` rigidly from its pose when clamped: its frame rotated by
-        `rotation` (3, 3), the vertex translated by `translation`. Turn less than pi per step."""
-        self.world._core.move_clamp(
-            self.index, self._vertex(vertex), _rotation(rotation, "rotation"), _vec3(translation, "translation")
-        )
-
-    def clamp_torque(self, vertex: int) -> float:
-        """Twisting moment [N m] the rod exerts on the clamp of `vertex` about its tangent."""
-        return float(self.world._core.clamp_torque(self.index, self._vertex(vertex)))
-
-    def grab(self, vertex: int, target: npt.ArrayLike) -> None:
-        """From the next step on, `vertex` follows `target` exactly (a hard position constraint;
-        the frame stays free). The motion to the target happens within the next step."""
-        self.world._core.grab(self.index, self._vertex(vertex), _vec3(target, "target"))
-
-    def move_grab(self, target: npt.ArrayLike) -> None:
-        """Moves the grab target. Raises SimulationError if nothing is grabbed."""
-        self.world._core.move_grab(self.index, _vec3(target, "target"))
-
-    def release(self) -> None:
-        """Lets go; the vertex keeps its velocity."""
-        self.world._core.release(self.index)
-
-    @property
-    def grabbed(self) -> tuple[int, np.ndarray] | None:
-        """(vertex, target) of the current grab, or None."""
-        g = self.world._core.grabbed(self.index)
-        return None if g is None else (int(g[0]), np.asarray(g[1], dtype=np.float64))
-
-    def transform(self, rotation: npt.ArrayLike | None = None, translation: npt.ArrayLike = (0.0, 0.0, 0.0)) -> None:
-        """Moves the rod rigidly, x -> R x + t, with its frames, pins, clamps and grab target."""
-        self.world._core.transform(self.index, _rotation(rotation, "rotation"), _vec3(translation, "translation"))
-
-    def set_positions(self, positions: npt.ArrayLike) -> None:
-        """Teleports the vertices (N, 3); velocities zeroed, frames parallel-transported."""
-        self.world._core.set_positions(self.index, _points(positions, "positions"))
-
-    def set_velocities(self, velocities: npt.ArrayLike) -> None:
-        self.world._core.set_velocities(self.index, _points(velocities, "velocities"))
-
-    # ----- simulation -----
 
     def step(self, dt: float, n: int = 1) -> StepReport:
         """Advances the rod's whole world by `dt` seconds, `n` times; returns this rod's report."""
@@ -524,7 +433,7 @@ class Rod:
     def solve_static(self) -> StaticReport:
         """Moves the rod to its equilibrium under gravity and constraints (Newton on the
         potential, no inertia); velocities zeroed."""
-        it, conv, e = self.world._core.solve_static(self.index)
+        it, conv, e = self._solve_static()
         if not conv:
             logger.warning("rod %d: static solve did not converge in %d iterations", self.index, it)
         return StaticReport(int(it), bool(conv), float(e))
@@ -538,82 +447,19 @@ class Rod:
             SimulationError: no rest shape holds the shape (its pins and clamps cannot carry its
                 weight; clamp an end, or turn gravity off).
         """
-        iterations, deviation = self.world._core.hold_under_gravity(self.index)
+        iterations, deviation = self._hold_under_gravity()
         return HoldReport(int(iterations), float(deviation))
 
-    # ----- state -----
-
-    @property
-    def positions(self) -> np.ndarray:
-        """(N, 3) float64 vertex positions [m]."""
-        return self.world._core.positions(self.index)
-
-    @property
-    def velocities(self) -> np.ndarray:
-        """(N, 3) float64 vertex velocities [m/s]."""
-        return self.world._core.velocities(self.index)
-
-    @property
-    def rest_positions(self) -> np.ndarray:
-        """(N, 3) float64: the polyline the rod was built from."""
-        return self.world._core.rest_positions(self.index)
-
-    @property
-    def rest_lengths(self) -> np.ndarray:
-        """(N-1,) rest edge lengths [m]."""
-        return self.world._core.rest_lengths(self.index)
-
-    @property
-    def masses(self) -> np.ndarray:
-        """(N,) lumped vertex masses [kg]."""
-        return self.world._core.masses(self.index)
-
-    @property
-    def twist(self) -> np.ndarray:
-        """(N-1,) twist angle of each edge's material frame from its reference frame [rad]."""
-        return self.world._core.twist_angles(self.index)
-
-    @property
-    def strain(self) -> np.ndarray:
-        """(N-1,) edge stretch |e| / |e_rest| - 1."""
-        return self.world._core.edge_strain(self.index)
-
-    def twisting_moment(self) -> np.ndarray:
-        """(N,) internal twisting moment GJ (m_i - m0_i) / l_i [N m] (zero at the ends)."""
-        return self.world._core.twisting_moment(self.index)
-
-    @property
-    def edge_frames(self) -> np.ndarray:
-        """(N-1, 3, 3) material frame of each edge, a rotation with columns (m1, m2, t)."""
-        return self.world._core.edge_frames(self.index)
-
-    @property
-    def vertex_frames(self) -> np.ndarray:
-        """(N, 3, 3) per-vertex frame: the average of the adjacent edges' frames."""
-        return self.world._core.vertex_frames(self.index)
-
-    @property
-    def edge_quats(self) -> np.ndarray:
-        """(N-1, 4) edge frames as unit quaternions w, x, y, z (w >= 0)."""
-        return self.world._core.edge_quats(self.index)
-
-    @property
-    def vertex_quats(self) -> np.ndarray:
-        """(N, 4) vertex frames as unit quaternions w, x, y, z (w >= 0)."""
-        return self.world._core.vertex_quats(self.index)
+    def energy(self) -> RodEnergy:
+        """Stretch, bend, twist, kinetic and gravitational energy [J]."""
+        return RodEnergy(**{k: float(v) for k, v in self._energy().items()})
 
     def frames(self) -> tuple[np.ndarray, np.ndarray]:
         """(edge frames (N-1, 3, 3), vertex frames (N, 3, 3)) as rotation matrices."""
         return self.edge_frames, self.vertex_frames
 
-    def energy(self) -> RodEnergy:
-        """Stretch, bend, twist, kinetic and gravitational energy [J]."""
-        return RodEnergy(**{k: float(v) for k, v in self.world._core.energy(self.index).items()})
-
-    def forces(self) -> tuple[np.ndarray, np.ndarray]:
-        """Elastic forces on the vertices (N, 3) [N] and torques on the edges' twist (N-1,) [N m]."""
-        return self.world._core.forces(self.index)
-
     def __repr__(self) -> str:
-        where = "detached" if self._index is None else f"rod {self._index} of {len(self._world)}"
-        return f"Rod({self._n} vertices, radius={self._params.radius}, E={self._params.youngs_modulus}, {where})"
+        where = f"rod {self.index} of {len(self._world)}" if self in self._world._rods else "detached"
+        return (
+            f"Rod({self.num_vertices} vertices, radius={self._params.radius}, E={self._params.youngs_modulus}, {where})"
+        )

@@ -1,8 +1,11 @@
-//! Bindings for `sketchrodgs-rod`: `_core.RodWorld`, a world of discrete elastic rods addressed
-//! by index. The public API is `sketchrodgs.rod` (`World`, `Rod`); this is its glue.
+//! Bindings for `sketchrodgs-rod`: `_core.RodWorld`, a world of discrete elastic rods, and
+//! `_core.Rod`, a handle on one of its rods (the base class of `sketchrodgs.rod.Rod`). The public
+//! API is `sketchrodgs.rod` (`World`, `Rod`).
 
 use numpy::ndarray::{Array1, Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{
+    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use sketchrodgs_rod::{
@@ -10,27 +13,11 @@ use sketchrodgs_rod::{
     World,
 };
 
-use crate::arrays::{check_shape, contiguous, no_panic};
+use crate::arrays::{contiguous, no_panic};
 use crate::errors::SimulationError;
 
 fn rod_err(err: RodError) -> PyErr {
     SimulationError::new_err(err.to_string())
-}
-
-/// Rows of a C-contiguous float64 `(N, 3)` array.
-fn points(array: &Bound<'_, PyArray2<f64>>, name: &str) -> PyResult<Vec<[f64; 3]>> {
-    let ro = array.try_readonly()?;
-    check_shape(name, ro.shape(), &[None, Some(3)])?;
-    let flat = contiguous(&ro, name)?;
-    Ok(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
-}
-
-/// A C-contiguous float64 `(3, 3)` array as row-major rows.
-fn matrix(array: &Bound<'_, PyArray2<f64>>, name: &str) -> PyResult<[[f64; 3]; 3]> {
-    let ro = array.try_readonly()?;
-    check_shape(name, ro.shape(), &[Some(3), Some(3)])?;
-    let f = contiguous(&ro, name)?;
-    Ok([[f[0], f[1], f[2]], [f[3], f[4], f[5]], [f[6], f[7], f[8]]])
 }
 
 fn vec3_array<'py>(py: Python<'py>, v: &[DVec3]) -> Bound<'py, PyArray2<f64>> {
@@ -60,19 +47,19 @@ fn f64_array<'py>(py: Python<'py>, v: Vec<f64>) -> Bound<'py, PyArray1<f64>> {
     Array1::from_vec(v).into_pyarray(py)
 }
 
-/// Several discrete elastic rods stepped together (see `sketchrodgs.rod.World`).
+/// Several discrete elastic rods stepped together (see `sketchrodgs.rod.World`). Each rod is a
+/// `Rod` handle that holds the world and the rod's id; removing a rod renumbers none of the others.
 #[pyclass(module = "sketchrodgs._core", name = "RodWorld")]
 pub struct RodWorld {
     world: World,
+    /// The id of the rod at each index of `world`.
+    ids: Vec<u64>,
+    next_id: u64,
 }
 
 impl RodWorld {
-    fn rod(&self, rod: usize) -> PyResult<&ElasticRod> {
-        self.world.rod(rod).map_err(rod_err)
-    }
-
-    fn rod_mut(&mut self, rod: usize) -> PyResult<&mut ElasticRod> {
-        self.world.rod_mut(rod).map_err(rod_err)
+    fn index_of(&self, id: u64) -> Option<usize> {
+        self.ids.iter().position(|&k| k == id)
     }
 }
 
@@ -80,40 +67,19 @@ impl RodWorld {
 impl RodWorld {
     #[new]
     fn new() -> Self {
-        Self { world: World::new() }
+        Self { world: World::new(), ids: Vec::new(), next_id: 0 }
     }
 
     fn __len__(&self) -> usize {
         self.world.len()
     }
 
-    /// Adds a rod at rest in the shape of `polyline` (N, 3) float64; returns its index.
-    #[pyo3(signature = (polyline, radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity))]
-    #[allow(clippy::too_many_arguments)]
-    fn add_rod(
-        &mut self,
-        polyline: &Bound<'_, PyArray2<f64>>,
-        radius: f64,
-        youngs_modulus: f64,
-        shear_modulus: Option<f64>,
-        poisson_ratio: f64,
-        density: f64,
-        damping: f64,
-        gravity: [f64; 3],
-    ) -> PyResult<usize> {
-        let poly = points(polyline, "polyline")?;
-        let params = RodParams { radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity };
-        let rod = ElasticRod::new(&poly, params).map_err(rod_err)?;
-        Ok(self.world.add(rod))
-    }
-
-    /// Removes rod `rod`; later indices shift down by one.
-    fn remove_rod(&mut self, rod: usize) -> PyResult<()> {
-        self.world.remove(rod).map(|_| ()).map_err(rod_err)
-    }
-
-    fn num_vertices(&self, rod: usize) -> PyResult<usize> {
-        Ok(self.rod(rod)?.num_vertices())
+    /// Removes `rod` from the world; its handle is then detached.
+    fn remove(&mut self, rod: PyRef<'_, Rod>) -> PyResult<()> {
+        let index = self.index_of(rod.id).ok_or_else(removed)?;
+        self.world.remove(index).map_err(rod_err)?;
+        self.ids.remove(index);
+        Ok(())
     }
 
     /// Solver settings as a dict.
@@ -134,103 +100,14 @@ impl RodWorld {
         Ok(())
     }
 
-    /// `kind` is "free", "pinned" or "clamped".
-    fn set_boundary(&mut self, rod: usize, vertex: usize, kind: &str) -> PyResult<()> {
-        let b = match kind {
-            "free" => Boundary::Free,
-            "pinned" => Boundary::Pinned,
-            "clamped" => Boundary::Clamped,
-            other => {
-                return Err(SimulationError::new_err(format!(
-                    "boundary kind {other:?}: expected 'free', 'pinned' or 'clamped'"
-                )));
-            }
-        };
-        self.rod_mut(rod)?.set_boundary(vertex, b).map_err(rod_err)
-    }
-
-    fn boundaries(&self, rod: usize) -> PyResult<Vec<&'static str>> {
-        Ok(self
-            .rod(rod)?
-            .boundaries()
-            .iter()
-            .map(|b| match b {
-                Boundary::Free => "free",
-                Boundary::Pinned => "pinned",
-                Boundary::Clamped => "clamped",
-            })
-            .collect())
-    }
-
-    fn pin_at(&mut self, rod: usize, vertex: usize, position: [f64; 3]) -> PyResult<()> {
-        self.rod_mut(rod)?.pin_at(vertex, position).map_err(rod_err)
-    }
-
-    fn move_clamp(
-        &mut self,
-        rod: usize,
-        vertex: usize,
-        rotation: &Bound<'_, PyArray2<f64>>,
-        translation: [f64; 3],
-    ) -> PyResult<()> {
-        let r = matrix(rotation, "rotation")?;
-        self.rod_mut(rod)?.move_clamp(vertex, r, translation).map_err(rod_err)
-    }
-
-    fn clamp_torque(&self, rod: usize, vertex: usize) -> PyResult<f64> {
-        self.rod(rod)?.clamp_torque(vertex).map_err(rod_err)
-    }
-
-    fn grab(&mut self, rod: usize, vertex: usize, target: [f64; 3]) -> PyResult<()> {
-        self.rod_mut(rod)?.grab(vertex, target).map_err(rod_err)
-    }
-
-    fn move_grab(&mut self, rod: usize, target: [f64; 3]) -> PyResult<()> {
-        self.rod_mut(rod)?.move_grab(target).map_err(rod_err)
-    }
-
-    fn release(&mut self, rod: usize) -> PyResult<()> {
-        self.rod_mut(rod)?.release();
-        Ok(())
-    }
-
-    /// The grabbed vertex and target, or None.
-    fn grabbed(&self, rod: usize) -> PyResult<Option<(usize, [f64; 3])>> {
-        Ok(self.rod(rod)?.grabbed().map(|(v, t)| (v, t.to_array())))
-    }
-
-    fn transform(&mut self, rod: usize, rotation: &Bound<'_, PyArray2<f64>>, translation: [f64; 3]) -> PyResult<()> {
-        let r = matrix(rotation, "rotation")?;
-        self.rod_mut(rod)?.transform(r, translation).map_err(rod_err)
-    }
-
-    fn set_positions(&mut self, rod: usize, positions: &Bound<'_, PyArray2<f64>>) -> PyResult<()> {
-        let p = points(positions, "positions")?;
-        self.rod_mut(rod)?.set_positions(&p).map_err(rod_err)
-    }
-
-    fn set_velocities(&mut self, rod: usize, velocities: &Bound<'_, PyArray2<f64>>) -> PyResult<()> {
-        let v = points(velocities, "velocities")?;
-        self.rod_mut(rod)?.set_velocities(&v).map_err(rod_err)
-    }
-
-    /// Advances every rod by `dt` seconds, `count` times, with the GIL released. Returns per rod
-    /// `(substeps, newton_iterations, rejected, converged)` summed over the calls.
+    /// Advances every rod by `dt` seconds, `count` times, with the GIL released. Returns per rod,
+    /// in the order they were added, `(substeps, newton_iterations, rejected, converged)` summed
+    /// over the calls.
     #[pyo3(signature = (dt, count = 1))]
     fn step(&mut self, py: Python<'_>, dt: f64, count: usize) -> PyResult<Vec<(u32, u32, u32, bool)>> {
         let world = &mut self.world;
         let reports = py.detach(|| no_panic("rod step", || world.step_many(dt, count)))?.map_err(rod_err)?;
         Ok(reports.iter().map(|r| (r.substeps, r.newton_iterations, r.rejected, r.converged)).collect())
-    }
-
-    /// Makes rod `rod`'s rest shape hold its current shape under its gravity:
-    /// `(iterations, deviation)` (docs/contact.md); SimulationError where nothing can hold it.
-    fn hold_under_gravity(&mut self, py: Python<'_>, rod: usize) -> PyResult<(usize, f64)> {
-        let settings = self.world.settings;
-        let r = self.rod_mut(rod)?;
-        let out =
-            py.detach(|| no_panic("rod hold under gravity", || r.hold_under_gravity(&settings)))?.map_err(rod_err)?;
-        Ok((out.iterations, out.deviation))
     }
 
     /// The scene's signed distance field the rods do not enter: `values` (nz, ny, nx) float32 at
@@ -267,67 +144,259 @@ impl RodWorld {
         self.world.contact = ContactSettings { scene, rods, friction };
         Ok(())
     }
+}
 
-    /// Quasi-static solve of rod `rod`: `(iterations, converged, energy)`.
-    fn solve_static(&mut self, py: Python<'_>, rod: usize) -> PyResult<(u32, bool, f64)> {
-        let settings = self.world.settings;
-        let r = self.rod_mut(rod)?;
-        let out = py.detach(|| no_panic("rod static solve", || r.solve_static(&settings)))?.map_err(rod_err)?;
-        Ok((out.iterations, out.converged, out.energy))
+fn removed() -> PyErr {
+    SimulationError::new_err("this rod was removed from its world")
+}
+
+fn busy(what: &str) -> PyErr {
+    SimulationError::new_err(format!(
+        "{what}: this World (and its rods) is in use by another thread; a World is not shared across threads: \
+         give each thread its own, or hold a lock"
+    ))
+}
+
+/// A discrete elastic rod in a `RodWorld` (the base of `sketchrodgs.rod.Rod`, which documents
+/// it). The handle holds the world and the rod's id, so it stays valid while other rods of the
+/// world are added or removed.
+#[pyclass(module = "sketchrodgs._core", name = "Rod", subclass)]
+pub struct Rod {
+    world: Py<RodWorld>,
+    id: u64,
+    vertices: usize,
+}
+
+impl Rod {
+    /// Runs `f` on the rod, the world borrowed for reading.
+    fn with<T>(&self, py: Python<'_>, what: &str, f: impl FnOnce(&ElasticRod) -> PyResult<T>) -> PyResult<T> {
+        let world = self.world.try_borrow(py).map_err(|_| busy(what))?;
+        let index = world.index_of(self.id).ok_or_else(removed)?;
+        f(world.world.rod(index).map_err(rod_err)?)
     }
 
-    fn positions<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        Ok(vec3_array(py, self.rod(rod)?.positions()))
+    /// Runs `f` on the rod, the world borrowed for writing.
+    fn with_mut<T>(
+        &self,
+        py: Python<'_>,
+        what: &str,
+        f: impl FnOnce(&mut ElasticRod, &SolverSettings) -> PyResult<T>,
+    ) -> PyResult<T> {
+        let mut world = self.world.try_borrow_mut(py).map_err(|_| busy(what))?;
+        let index = world.index_of(self.id).ok_or_else(removed)?;
+        let settings = world.world.settings;
+        f(world.world.rod_mut(index).map_err(rod_err)?, &settings)
     }
 
-    fn velocities<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        Ok(vec3_array(py, self.rod(rod)?.velocities()))
+    /// `vertex` as an index into the rod; negative counts from the end.
+    fn vertex(&self, vertex: i64) -> PyResult<usize> {
+        let n = self.vertices as i64;
+        if (-n..n).contains(&vertex) {
+            Ok(vertex.rem_euclid(n) as usize)
+        } else {
+            Err(SimulationError::new_err(format!("vertex {vertex} is out of range for a rod of {n} vertices")))
+        }
+    }
+}
+
+#[pymethods]
+impl Rod {
+    /// Adds a rod at rest in the shape of `polyline` (N, 3) to `world`.
+    #[new]
+    #[pyo3(signature = (world, polyline, radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        world: Bound<'_, RodWorld>,
+        polyline: &Bound<'_, PyAny>,
+        radius: f64,
+        youngs_modulus: f64,
+        shear_modulus: Option<f64>,
+        poisson_ratio: f64,
+        density: f64,
+        damping: f64,
+        gravity: [f64; 3],
+    ) -> PyResult<Self> {
+        let poly = rows3(polyline, "polyline")?;
+        let params = RodParams { radius, youngs_modulus, shear_modulus, poisson_ratio, density, damping, gravity };
+        let rod = ElasticRod::new(&poly, params).map_err(rod_err)?;
+        let vertices = rod.num_vertices();
+        let mut w = world.try_borrow_mut().map_err(|_| busy("Rod"))?;
+        let id = w.next_id;
+        w.next_id += 1;
+        w.world.add(rod);
+        w.ids.push(id);
+        drop(w);
+        Ok(Self { world: world.unbind(), id, vertices })
     }
 
-    fn rest_positions<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        Ok(vec3_array(py, self.rod(rod)?.rest_positions()))
+    fn __len__(&self) -> usize {
+        self.vertices
     }
 
-    fn rest_lengths<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(f64_array(py, self.rod(rod)?.rest_lengths().to_vec()))
+    #[getter]
+    fn num_vertices(&self) -> usize {
+        self.vertices
     }
 
-    fn masses<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(f64_array(py, self.rod(rod)?.masses().to_vec()))
+    /// Index of the rod in its world (the order of `World.step`'s reports).
+    #[getter]
+    fn index(&self, py: Python<'_>) -> PyResult<usize> {
+        let world = self.world.try_borrow(py).map_err(|_| busy("index"))?;
+        world.index_of(self.id).ok_or_else(removed)
     }
 
-    fn twist_angles<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(f64_array(py, self.rod(rod)?.twist_angles().to_vec()))
+    // ----- boundary conditions and interaction -----
+
+    /// Holds `vertex`'s position and frame where they are (both ends: the app's default).
+    fn clamp(&self, py: Python<'_>, vertex: i64) -> PyResult<()> {
+        self.set(py, vertex, Boundary::Clamped)
     }
 
-    fn edge_strain<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(f64_array(py, self.rod(rod)?.edge_strain()))
+    /// Holds `vertex`'s position (at `position` if given, reached over the next step).
+    #[pyo3(signature = (vertex, position = None))]
+    fn pin(&self, py: Python<'_>, vertex: i64, position: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+        let v = self.vertex(vertex)?;
+        match position {
+            None => self.set(py, vertex, Boundary::Pinned),
+            Some(p) => {
+                let p = vec3(p, "position")?;
+                self.with_mut(py, "pin", |rod, _| rod.pin_at(v, p).map_err(rod_err))
+            }
+        }
     }
 
-    fn twisting_moment<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(f64_array(py, self.rod(rod)?.twisting_moment()))
+    /// Removes any pin or clamp of `vertex`.
+    fn free(&self, py: Python<'_>, vertex: i64) -> PyResult<()> {
+        self.set(py, vertex, Boundary::Free)
     }
 
-    /// Row-major rotations (N-1, 3, 3) with columns (m1, m2, t).
-    fn edge_frames<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        Ok(mat_array(py, &self.rod(rod)?.edge_frames()))
+    /// Sets `vertex`'s boundary condition: "free", "pinned" or "clamped".
+    fn set_boundary(&self, py: Python<'_>, vertex: i64, kind: &str) -> PyResult<()> {
+        let b = match kind {
+            "free" => Boundary::Free,
+            "pinned" => Boundary::Pinned,
+            "clamped" => Boundary::Clamped,
+            other => {
+                return Err(SimulationError::new_err(format!(
+                    "boundary kind {other:?}: expected 'free', 'pinned' or 'clamped'"
+                )));
+            }
+        };
+        self.set(py, vertex, b)
     }
 
-    fn vertex_frames<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        Ok(mat_array(py, &self.rod(rod)?.vertex_frames()))
+    /// Per vertex: "free", "pinned" or "clamped".
+    #[getter]
+    fn boundaries(&self, py: Python<'_>) -> PyResult<Vec<&'static str>> {
+        self.with(py, "boundaries", |rod| {
+            Ok(rod
+                .boundaries()
+                .iter()
+                .map(|b| match b {
+                    Boundary::Free => "free",
+                    Boundary::Pinned => "pinned",
+                    Boundary::Clamped => "clamped",
+                })
+                .collect())
+        })
     }
 
-    fn edge_quats<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        Ok(quat_array(py, &self.rod(rod)?.edge_quats()))
+    /// Moves the clamp of `vertex` rigidly from its pose when clamped: its frame rotated by
+    /// `rotation` (3, 3), the vertex translated by `translation`. Turn less than pi per step.
+    #[pyo3(signature = (vertex, rotation = None, translation = None))]
+    fn move_clamp(
+        &self,
+        py: Python<'_>,
+        vertex: i64,
+        rotation: Option<&Bound<'_, PyAny>>,
+        translation: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let (v, r, t) = (self.vertex(vertex)?, rotation3(rotation)?, translation3(translation)?);
+        self.with_mut(py, "move_clamp", |rod, _| rod.move_clamp(v, r, t).map_err(rod_err))
     }
 
-    fn vertex_quats<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        Ok(quat_array(py, &self.rod(rod)?.vertex_quats()))
+    /// Twisting moment [N m] the rod exerts on the clamp of `vertex` about its tangent.
+    fn clamp_torque(&self, py: Python<'_>, vertex: i64) -> PyResult<f64> {
+        let v = self.vertex(vertex)?;
+        self.with(py, "clamp_torque", |rod| rod.clamp_torque(v).map_err(rod_err))
+    }
+
+    /// From the next step on, `vertex` follows `target` exactly (a hard position constraint;
+    /// the frame stays free). The motion to the target happens within the next step.
+    fn grab(&self, py: Python<'_>, vertex: i64, target: &Bound<'_, PyAny>) -> PyResult<()> {
+        let (v, t) = (self.vertex(vertex)?, vec3(target, "target")?);
+        self.with_mut(py, "grab", |rod, _| rod.grab(v, t).map_err(rod_err))
+    }
+
+    /// Moves the grab target. Raises SimulationError if nothing is grabbed.
+    fn move_grab(&self, py: Python<'_>, target: &Bound<'_, PyAny>) -> PyResult<()> {
+        let t = vec3(target, "target")?;
+        self.with_mut(py, "move_grab", |rod, _| rod.move_grab(t).map_err(rod_err))
+    }
+
+    /// Lets go; the vertex keeps its velocity.
+    fn release(&self, py: Python<'_>) -> PyResult<()> {
+        self.with_mut(py, "release", |rod, _| {
+            rod.release();
+            Ok(())
+        })
+    }
+
+    /// (vertex, target) of the current grab, or None.
+    #[getter]
+    fn grabbed<'py>(&self, py: Python<'py>) -> PyResult<Option<(usize, Bound<'py, PyArray1<f64>>)>> {
+        let grab = self.with(py, "grabbed", |rod| Ok(rod.grabbed()))?;
+        Ok(grab.map(|(v, t)| (v, f64_array(py, t.to_array().to_vec()))))
+    }
+
+    /// Moves the rod rigidly, x -> R x + t, with its frames, pins, clamps and grab target.
+    #[pyo3(signature = (rotation = None, translation = None))]
+    fn transform(
+        &self,
+        py: Python<'_>,
+        rotation: Option<&Bound<'_, PyAny>>,
+        translation: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let (r, t) = (rotation3(rotation)?, translation3(translation)?);
+        self.with_mut(py, "transform", |rod, _| rod.transform(r, t).map_err(rod_err))
+    }
+
+    /// Teleports the vertices (N, 3); velocities zeroed, frames parallel-transported.
+    fn set_positions(&self, py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<()> {
+        let p = rows3(positions, "positions")?;
+        self.with_mut(py, "set_positions", |rod, _| rod.set_positions(&p).map_err(rod_err))
+    }
+
+    /// Sets the vertex velocities (N, 3) [m/s].
+    fn set_velocities(&self, py: Python<'_>, velocities: &Bound<'_, PyAny>) -> PyResult<()> {
+        let v = rows3(velocities, "velocities")?;
+        self.with_mut(py, "set_velocities", |rod, _| rod.set_velocities(&v).map_err(rod_err))
+    }
+
+    // ----- simulation (wrapped by `sketchrodgs.rod.Rod` into its reports) -----
+
+    /// Quasi-static solve: `(iterations, converged, energy)`, with the GIL released.
+    fn _solve_static(&self, py: Python<'_>) -> PyResult<(u32, bool, f64)> {
+        self.with_mut(py, "solve_static", |rod, settings| {
+            let out = py.detach(|| no_panic("rod static solve", || rod.solve_static(settings)))?.map_err(rod_err)?;
+            Ok((out.iterations, out.converged, out.energy))
+        })
+    }
+
+    /// Makes the rest shape hold the current shape under gravity: `(iterations, deviation)`
+    /// (docs/contact.md); SimulationError where nothing can hold it.
+    fn _hold_under_gravity(&self, py: Python<'_>) -> PyResult<(usize, f64)> {
+        self.with_mut(py, "hold_under_gravity", |rod, settings| {
+            let out = py
+                .detach(|| no_panic("rod hold under gravity", || rod.hold_under_gravity(settings)))?
+                .map_err(rod_err)?;
+            Ok((out.iterations, out.deviation))
+        })
     }
 
     /// Energies in joules: stretch, bend, twist, kinetic, gravity.
-    fn energy<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyDict>> {
-        let e = self.rod(rod)?.energy();
+    fn _energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let e = self.with(py, "energy", |rod| Ok(rod.energy()))?;
         let d = PyDict::new(py);
         d.set_item("stretch", e.stretch)?;
         d.set_item("bend", e.bend)?;
@@ -337,21 +406,152 @@ impl RodWorld {
         Ok(d)
     }
 
-    /// Elastic forces (N, 3) [N] and twist torques (N-1,) [N m].
-    #[allow(clippy::type_complexity)]
-    fn forces<'py>(
-        &mut self,
-        py: Python<'py>,
-        rod: usize,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
-        let (f, t) = self.rod_mut(rod)?.forces();
-        Ok((vec3_array(py, &f), f64_array(py, t)))
+    /// The material as the solver holds it, as a dict (shear modulus resolved).
+    fn _material<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.with(py, "params", |rod| Ok(*rod.params()))?;
+        params_dict(py, &p)
     }
 
-    /// Material parameters of rod `rod` as a dict (shear modulus resolved).
-    fn params<'py>(&self, py: Python<'py>, rod: usize) -> PyResult<Bound<'py, PyDict>> {
-        params_dict(py, self.rod(rod)?.params())
+    // ----- state -----
+
+    /// (N, 3) float64 vertex positions [m].
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.with(py, "positions", |rod| Ok(vec3_array(py, rod.positions())))
     }
+
+    /// (N, 3) float64 vertex velocities [m/s].
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.with(py, "velocities", |rod| Ok(vec3_array(py, rod.velocities())))
+    }
+
+    /// (N, 3) float64: the polyline the rod was built from (its rest shape).
+    #[getter]
+    fn rest_positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.with(py, "rest_positions", |rod| Ok(vec3_array(py, rod.rest_positions())))
+    }
+
+    /// (N-1,) rest edge lengths [m].
+    #[getter]
+    fn rest_lengths<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        self.with(py, "rest_lengths", |rod| Ok(f64_array(py, rod.rest_lengths().to_vec())))
+    }
+
+    /// (N,) lumped vertex masses [kg].
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        self.with(py, "masses", |rod| Ok(f64_array(py, rod.masses().to_vec())))
+    }
+
+    /// (N-1,) twist angle of each edge's material frame from its reference frame [rad].
+    #[getter]
+    fn twist<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        self.with(py, "twist", |rod| Ok(f64_array(py, rod.twist_angles().to_vec())))
+    }
+
+    /// (N-1,) edge stretch |e| / |e_rest| - 1.
+    #[getter]
+    fn strain<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        self.with(py, "strain", |rod| Ok(f64_array(py, rod.edge_strain())))
+    }
+
+    /// (N,) internal twisting moment GJ (m_i - m0_i) / l_i [N m] (zero at the ends).
+    fn twisting_moment<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        self.with(py, "twisting_moment", |rod| Ok(f64_array(py, rod.twisting_moment())))
+    }
+
+    /// (N-1, 3, 3) material frame of each edge, a rotation with columns (m1, m2, t).
+    #[getter]
+    fn edge_frames<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        self.with(py, "edge_frames", |rod| Ok(mat_array(py, &rod.edge_frames())))
+    }
+
+    /// (N, 3, 3) per-vertex frame: the average of the adjacent edges' frames.
+    #[getter]
+    fn vertex_frames<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        self.with(py, "vertex_frames", |rod| Ok(mat_array(py, &rod.vertex_frames())))
+    }
+
+    /// (N-1, 4) edge frames as unit quaternions w, x, y, z (w >= 0).
+    #[getter]
+    fn edge_quats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.with(py, "edge_quats", |rod| Ok(quat_array(py, &rod.edge_quats())))
+    }
+
+    /// (N, 4) vertex frames as unit quaternions w, x, y, z (w >= 0).
+    #[getter]
+    fn vertex_quats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.with(py, "vertex_quats", |rod| Ok(quat_array(py, &rod.vertex_quats())))
+    }
+
+    /// Elastic forces on the vertices (N, 3) [N] and torques on the edges' twist (N-1,) [N m].
+    #[allow(clippy::type_complexity)]
+    fn forces<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
+        let (f, t) = self.with_mut(py, "forces", |rod, _| Ok(rod.forces()))?;
+        Ok((vec3_array(py, &f), f64_array(py, t)))
+    }
+}
+
+impl Rod {
+    fn set(&self, py: Python<'_>, vertex: i64, boundary: Boundary) -> PyResult<()> {
+        let v = self.vertex(vertex)?;
+        self.with_mut(py, "set_boundary", |rod, _| rod.set_boundary(v, boundary).map_err(rod_err))
+    }
+}
+
+/// `value` as a float64 array of any shape (lists and other array-likes converted).
+fn float_array<'py>(value: &Bound<'py, PyAny>, name: &str) -> PyResult<PyArrayLikeDyn<'py, f64, AllowTypeChange>> {
+    value.extract().map_err(|_| SimulationError::new_err(format!("{name}: expected an array of numbers")))
+}
+
+/// A shape written as Python writes a tuple: `(3,)`, `(2, 4)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [one] => format!("({one},)"),
+        _ => format!("({})", shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+/// Rows of an `(N, 3)` array-like.
+fn rows3(value: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f64; 3]>> {
+    let array = float_array(value, name)?;
+    let view = array.as_array();
+    if view.ndim() != 2 || view.shape()[1] != 3 {
+        return Err(SimulationError::new_err(format!(
+            "{name}: expected shape (N, 3), got {}",
+            shape_text(view.shape())
+        )));
+    }
+    Ok(view.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+/// Three numbers, of any shape holding exactly three.
+fn vec3(value: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 3]> {
+    let array = float_array(value, name)?;
+    let view = array.as_array();
+    let values: Vec<f64> = view.iter().copied().collect();
+    <[f64; 3]>::try_from(values).map_err(|_| {
+        SimulationError::new_err(format!("{name}: expected 3 values, got shape {}", shape_text(view.shape())))
+    })
+}
+
+fn translation3(value: Option<&Bound<'_, PyAny>>) -> PyResult<[f64; 3]> {
+    value.map_or(Ok([0.0; 3]), |v| vec3(v, "translation"))
+}
+
+/// A (3, 3) rotation as row-major rows; None is the identity.
+fn rotation3(value: Option<&Bound<'_, PyAny>>) -> PyResult<[[f64; 3]; 3]> {
+    let Some(value) = value else { return Ok([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) };
+    let array = float_array(value, "rotation")?;
+    let view = array.as_array();
+    if view.shape() != [3, 3] {
+        return Err(SimulationError::new_err(format!(
+            "rotation: expected a (3, 3) rotation matrix, got shape {}",
+            shape_text(view.shape())
+        )));
+    }
+    Ok([0, 1, 2].map(|i| [view[[i, 0]], view[[i, 1]], view[[i, 2]]]))
 }
 
 fn params_dict<'py>(py: Python<'py>, p: &RodParams) -> PyResult<Bound<'py, PyDict>> {
@@ -389,6 +589,7 @@ fn default_solver_settings(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RodWorld>()?;
+    m.add_class::<Rod>()?;
     m.add_function(wrap_pyfunction!(default_rod_params, m)?)?;
     m.add_function(wrap_pyfunction!(default_solver_settings, m)?)?;
     Ok(())
