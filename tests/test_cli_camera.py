@@ -12,6 +12,7 @@ from conftest import DATA
 from sketchrodgs import Camera, GaussianScene, data, load_cameras, load_scene, render
 from sketchrodgs.cli import main
 from sketchrodgs.framing import AXES, frame_scene, guess_up_axis, scene_up
+from sketchrodgs.io import format_up
 
 WIDTH, HEIGHT = 240, 135
 # scene -> (its up axis, the Gaussians at its foot: pot, trunk, stand), seen in renders
@@ -21,6 +22,7 @@ UPRIGHT = {
     "guitar": (DATA / "guitar.compressed.ply", "-y", lambda m: m[:, 1] > -0.3),
     "ring": (data.sample("ring"), "+z", None),  # lies flat
     "donut": (DATA / "donut.ply", "+z", None),  # lies flat, icing up
+    "biker": (DATA / "biker.spz", "+y", lambda m: m[:, 1] < 0.3),  # SPZ: right-up-back, feet at y = 0
 }
 
 
@@ -36,8 +38,8 @@ def covered(scene: GaussianScene, camera: Camera) -> np.ndarray:
 @pytest.mark.parametrize("name", list(UPRIGHT))
 def test_the_default_camera_shows_the_scene_whole_and_upright(name, scenes):
     scene = scenes[name]
-    _, axis, foot = UPRIGHT[name]
-    up = scene_up(scene)
+    path, axis, foot = UPRIGHT[name]
+    up = scene_up(scene, file_up=format_up(path))
     assert up.axis == axis and up.source == "guess"
     camera = frame_scene(scene, up.vector, width=WIDTH, height=HEIGHT)
     mask = covered(scene, camera)
@@ -162,6 +164,9 @@ def test_info_reports_the_up_axis(capsys):
     assert main(["info", "sample:ring", "--json"]) == 0
     up = json.loads(capsys.readouterr().out)["up"]
     assert up["axis"] == "+z" and up["source"] == "guess" and up["vector"] == [0, 0, 1]
+    # an SPZ file's axes are fixed by its format (right-up-back), whatever its shape
+    assert main(["info", str(DATA / "biker.spz")]) == 0
+    assert "up         +y  (guessed: the SPZ convention (right-up-back)" in capsys.readouterr().out
 
 
 def test_help_lists_the_samples(capsys):

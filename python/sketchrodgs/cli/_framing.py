@@ -84,13 +84,14 @@ def scene_cameras(args: argparse.Namespace) -> list[Camera]:
 def framed_camera(args: argparse.Namespace, scene: GaussianScene, cameras: list[Camera]) -> tuple[Camera, Up]:
     """The camera the framing options describe, with the up direction it used."""
     from ..framing import DEFAULT_ORBIT, DEFAULT_SIZE, frame_scene, scene_up
+    from ..io import format_up
 
     if getattr(args, "view", None) is not None:
         raise UsageError(
             "--view picks a camera of a camera file; it cannot be used with --orbit, --distance, --up or "
             "--look-at, nor without a camera file"
         )
-    up = scene_up(scene, cameras, args.up)
+    up = scene_up(scene, cameras, args.up, format_up(args.scene))
     width, height = args.width, args.height
     if width is None and height is None:
         width, height = DEFAULT_SIZE

@@ -29,12 +29,12 @@ def scene_summary(path: str, cameras_path: str | None = None) -> dict[str, Any]:
 
     from ..camera import load_cameras
     from ..framing import scene_up
-    from ..io import FORMAT_NAMES, detect_format, load_scene, scene_file
+    from ..io import FORMAT_NAMES, detect_format, format_up, load_scene, scene_file
 
     scene = load_scene(path)
     fmt = detect_format(path)
     largest_scale = scene.scales.max(axis=1)
-    up = scene_up(scene, load_cameras(cameras_path) if cameras_path else [])
+    up = scene_up(scene, load_cameras(cameras_path) if cameras_path else [], file_up=format_up(path))
 
     def stats(values: np.ndarray) -> dict[str, float]:
         q = np.percentile(values, [0, 50, 100])

@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     from ..camera import select_camera
     from ..extract import load_rod
     from ..framing import AXES, frame_scene, scene_up
-    from ..io import load_scene
+    from ..io import format_up, load_scene
     from ..scene_identity import check_rod_scene
     from ..viewer import ViewerApp
     from ..viewer.material import GRAVITY, Material
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     for path, (extraction, _) in zip(args.rod, loaded):
         check_rod_scene(extraction.scene_identity, scene, path, args.scene)
-    up = scene_up(scene, cameras, args.up)
+    up = scene_up(scene, cameras, args.up, format_up(args.scene))
     if args.camera:
         camera = select_camera(cameras, args.view, camera_file(args) or "")
     elif loaded:

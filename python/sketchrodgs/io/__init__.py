@@ -13,12 +13,12 @@ import os
 import zlib
 from pathlib import Path
 
-from ..errors import SceneFileNotFoundError, SceneFormatError
+from ..errors import SceneFileNotFoundError, SceneFormatError, SketchRodGSError
 from ..scene import GaussianScene
 from . import compressed_ply, ply, splat, spz
 from .training_output import scene_file, training_cameras
 
-__all__ = ["FORMAT_NAMES", "detect_format", "load_scene", "save_scene", "scene_file", "training_cameras"]
+__all__ = ["FORMAT_NAMES", "detect_format", "format_up", "load_scene", "save_scene", "scene_file", "training_cameras"]
 
 _READERS = {
     "ply": ply.read_ply,
@@ -35,6 +35,21 @@ FORMAT_NAMES = {
 }
 _HEAD_BYTES = 1 << 16  # enough for any PLY header we read, and for a gzip header
 _WRITERS = {".ply": ply.write_ply, ".splat": splat.write_splat}
+
+
+# Formats whose specification fixes the axes: SPZ stores right-up-back (RUB, as OpenGL and
+# three.js; Niantic's spz README, "Coordinate System"), so +y is up. PLY and .splat files carry
+# whatever their trainer used (COLMAP's y-down for most captures): they say nothing.
+_FORMAT_UP = {"spz": ("+y", "the SPZ convention (right-up-back)")}
+
+
+def format_up(path: str | os.PathLike[str]) -> tuple[str, str] | None:
+    """(up axis, why) where the format of the scene file at `path` fixes its axes, else None
+    (also for a file that cannot be read: loading it reports that)."""
+    try:
+        return _FORMAT_UP.get(detect_format(path))
+    except SketchRodGSError:
+        return None
 
 
 def detect_format(path: str | os.PathLike[str]) -> str:
