@@ -10,9 +10,10 @@ import pytest
 
 from sketchrodgs import Camera, extract_rod, synthetic
 from sketchrodgs.extract import Extraction
+from sketchrodgs.polyline import polyline_length
 from sketchrodgs.rod import Rod
 from sketchrodgs.scene import GaussianScene
-from sketchrodgs.segment import segment_and_bind
+from sketchrodgs.segment import DEFAULT_GROW, default_attach_size, part_and_attached, segment_and_bind
 from sketchrodgs.skin import BoundRod, skin
 
 R = 0.01
@@ -119,7 +120,30 @@ def test_attaching_can_be_turned_off_and_the_size_limit_holds():
     assert not off.attached.any()
     assert np.isin(leaf_rows, off.gaussian_ids).mean() < 0.2  # only the petiole's foot, in the part
     small = segment_and_bind(AXIS, scene, R, attach_size=4 * R)  # the leaf reaches 8.5 R from its joint
-    assert not small.attached.any()
+    assert not np.isin(leaf_rows, small.gaussian_ids[small.attached]).any()
+
+
+def test_a_small_cluster_of_floaters_past_an_end_rides_along_but_not_a_long_rail_or_a_touching_body():
+    # above the tube 1.9 R from the axis: a 0.9 R gap from its surface, more than a link
+    def blob(x: float) -> np.ndarray:
+        return grid((x - 0.3 * R, 0.05 + 1.9 * R, -0.3 * R), (x + 0.3 * R, 0.05 + 2.1 * R, 0.3 * R), 0.001)
+
+    rail = grid((-0.44, 0.05 - 2.0 * R, -0.001), (-0.2, 0.05 - 1.9 * R, 0.001), 0.002)  # 24 R long
+    # a blob near the other end resting on a body that reaches far above
+    tower = grid((-0.3 * R + 0.43, 0.05 + 2.1 * R, -0.001), (0.3 * R + 0.43, 0.05 + 30 * R, 0.001), 0.002)
+    scene, rows = with_extras(
+        end=blob(0.445), middle=blob(0.0), rail=rail, touching=blob(0.43 - 0.6 * R) + [0, 0, 0.0], tower=tower
+    )
+    binding = segment_and_bind(AXIS, scene, R)
+    ids = np.arange(len(scene))
+    follows = {name: np.isin(ids[part], binding.gaussian_ids) for name, part in rows.items()}
+    assert follows["end"].all()  # past the end: the strays ride along, attached
+    assert binding.attached[np.isin(binding.gaussian_ids, ids[rows["end"]])].all()
+    assert not follows["middle"].any()  # along the rod only the linked halo goes (the part's reach)
+    assert not follows["rail"].any() and not follows["tower"].any()
+    assert not follows["touching"].any()
+    off = segment_and_bind(AXIS, scene, R, attach=False)
+    assert not np.isin(ids[rows["end"]], off.gaussian_ids).any()
 
 
 def test_a_part_touching_the_rod_near_its_end_from_the_side_is_not_attached():
@@ -189,7 +213,15 @@ def test_segmentation_matches_the_numpy_reference(case, options):
         (scene, _), axis = with_extras(leaf=leaf_on_a_petiole(0.44)), AXIS
     else:
         axis, scene = _clutter_rope()
-    binding = segment_and_bind(axis, scene, R, **options)
+    # the Rust step the reference describes: the part and attached parts (strays come after it)
+    size = options.get("attach_size", default_attach_size(polyline_length(axis), R))
+    binding = part_and_attached(
+        axis,
+        scene,
+        R,
+        grow=options.get("grow", DEFAULT_GROW),
+        attach_size=size if options.get("attach", True) else None,
+    )
     assert len(binding.gaussian_ids) > 100
     _same_binding(binding, reference(axis, scene.means, R, **options))
 

@@ -9,7 +9,11 @@ distance are neighbours, so a gap in the cloud separates parts):
 - attached parts: what hangs on the part and is small (every piece of it within `attach_size` of
   where it joins; a leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the
   rod point where it joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach
-  further and stay.
+  further and stay;
+- strays: small clusters (at most `STRAY_SIZE` R across) within `STRAY_REACH` R of what moves past
+  the rod's ends or of its attached parts, across a gap wider than a link but joined to nothing
+  else (the halo of floaters around a guitar's headstock). Left behind, they would hang in the air
+  where the part was; each rides with the moving Gaussian nearest it.
 
 No band of partly moving Gaussians around the part: where the part has a gap around it there is
 nothing to blend with, and where it touches something (a crossing branch) a band 1 R wide made
@@ -26,9 +30,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from . import _core
-from .polyline import arc_lengths, polyline_length
+from .polyline import arc_lengths, near_box, polyline_length
 from .scene import GaussianScene
 
 # The part's cross-section reaches this many R from the axis. Surface Gaussians sit at about one
@@ -42,6 +49,12 @@ END_MARGIN = 3.0  # within this many R of a rod end, only what lies past the end
 # between LINK_MIN and LINK_MAX radii (real captures range from 0.1 to 0.4 R).
 LINK_SPACINGS = 1.5
 LINK_MIN, LINK_MAX = 0.2, 0.75
+# Strays: clusters of linked unbound Gaussians that come within STRAY_REACH R of a moving one and
+# span at most STRAY_SIZE R (a cluster joined to the rest of the scene spans more)...
+STRAY_REACH = 1.0
+STRAY_SIZE = 2.0
+# ... past the rod's ends (within this many R of them along it) and around attached parts.
+STRAY_END_RADII = 2.0
 
 
 def default_attach_size(length: float, radius: float) -> float:
@@ -97,29 +110,109 @@ def segment_and_bind(
         scene: the scene (its centres are read).
         radius: R.
         grow: the part's cross-section reaches `grow * R` from the axis.
-        attach: let small attached parts ride with the rod.
+        attach: let small attached parts and strays ride with the rod.
         attach_size: the largest attached part (default `default_attach_size`).
     """
     polyline = np.ascontiguousarray(polyline, np.float64)
-    length = polyline_length(polyline)
     if attach_size is None:
-        attach_size = default_attach_size(length, radius)
+        attach_size = default_attach_size(polyline_length(polyline), radius)
+    binding = part_and_attached(polyline, scene, radius, grow=grow, attach_size=attach_size if attach else None)
+    return _with_strays(binding, polyline, scene, radius) if attach else binding
+
+
+def part_and_attached(
+    polyline: np.ndarray, scene: GaussianScene, radius: float, *, grow: float, attach_size: float | None
+) -> Binding:
+    """The part and its attached parts (None: none), in one Rust call, without the strays: the
+    step that `tests/reference/segment_reference.py` matches to the bit."""
+    polyline = np.ascontiguousarray(polyline, np.float64)
     # The arc lengths and the length as NumPy sums them: the decisions near the rod's ends compare
     # with them to the bit.
     ids, segment, t, offset, distance, attached = _core.segment_and_bind(
         polyline,
         arc_lengths(polyline),
-        length,
+        polyline_length(polyline),
         _f32(scene.means),
         float(radius),
         float(grow),
         LINK_SPACINGS,
         LINK_MIN,
         LINK_MAX,
-        float(attach_size) if attach else None,
+        None if attach_size is None else float(attach_size),
         END_MARGIN,
     )
     return Binding(ids, segment, t, offset, distance, attached)
+
+
+def _with_strays(binding: Binding, polyline: np.ndarray, scene: GaussianScene, radius: float) -> Binding:
+    """`binding` and the strays around it (see the module docstring), each bound as an attached
+    Gaussian at the `(segment, t)` of the moving Gaussian nearest it, with its own offset."""
+    # Along the rod the part's own reach (`grow` R) takes its halo; strays hang past the rod's ends
+    # and around attached parts, so only the Gaussians there are searched around.
+    arc = arc_lengths(polyline)
+    along = arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
+    start = along <= STRAY_END_RADII * radius
+    end = along >= arc[-1] - STRAY_END_RADII * radius
+    searched = np.flatnonzero(binding.attached | start | end)  # entries of the binding
+    if len(searched) < 5:
+        return binding
+    moving = scene.means[binding.gaussian_ids[searched]].astype(np.float64)
+    moving_tree = cKDTree(moving, balanced_tree=False, compact_nodes=False)
+    # the part's link, as the segmentation takes it: 1.5 times the typical 4th-neighbour spacing
+    sample = moving[:: max(1, len(moving) // 500)]
+    spacing = float(np.median(moving_tree.query(sample, k=5)[0][:, 4]))
+    link = float(np.clip(LINK_SPACINGS * spacing, LINK_MIN * radius, LINK_MAX * radius))
+    reach, size = STRAY_REACH * radius, STRAY_SIZE * radius
+    # unbound Gaussians near what moves, and as far again as a stray cluster may reach (its whole
+    # cluster then lies in this region, unless it runs on further: then it is too large anyway)
+    region = reach + size + link
+    axis32 = _f32(polyline)
+    farthest = float(binding.distance.max()) + region
+    groups = [binding.attached, start & ~binding.attached, end & ~binding.attached]
+    # around each end and the attached parts apart: one box around a long rope would hold it all
+    boxes = [near_box(scene.means[binding.gaussian_ids[g]], scene.means, region) for g in groups if g.any()]
+    rows = np.unique(np.concatenate(boxes))
+    segment_of, _, _ = _core.nearest_on_polyline(axis32, _f32(scene.means[rows]), farthest)
+    rows = rows[segment_of >= 0]
+    rows = rows[~np.isin(rows, binding.gaussian_ids)]
+    if len(rows) == 0:
+        return binding
+    points = scene.means[rows].astype(np.float64)
+    to_moving, nearest = moving_tree.query(points, distance_upper_bound=region)
+    inside = np.isfinite(to_moving)
+    rows, points, to_moving, nearest = rows[inside], points[inside], to_moving[inside], nearest[inside]
+    if not (to_moving <= reach).any():
+        return binding
+    # clusters of linked Gaussians; one goes when it comes within `reach` of what moves and is no
+    # larger than `size` (one that runs on into the scene is larger)
+    count = len(points)
+    pairs = cKDTree(points).query_pairs(link, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    clusters, label = connected_components(graph, directed=False)
+    close = np.zeros(clusters, bool)
+    close[label[to_moving <= reach]] = True
+    low = np.full((clusters, 3), np.inf)
+    high = np.full((clusters, 3), -np.inf)
+    np.minimum.at(low, label, points)
+    np.maximum.at(high, label, points)
+    goes = (close & (np.linalg.norm(high - low, axis=1) <= size))[label]
+    if not goes.any():
+        return binding
+    stray_rows = rows[goes]
+    # each rides with the searched Gaussian nearest it
+    joined = searched[nearest[goes]]
+    segment, t = binding.segment[joined], binding.t[joined]
+    centre = scene.means[stray_rows].astype(np.float64)
+    _, _, distance = _core.nearest_on_polyline(axis32, _f32(centre), farthest)
+    strays = Binding(
+        stray_rows.astype(np.int64),
+        segment.astype(np.int32),
+        t.astype(np.float32),
+        (centre - point_at(polyline, segment, t)).astype(np.float32),
+        distance.astype(np.float32),
+        np.ones(len(stray_rows), bool),
+    )
+    return binding.extend(strays)
 
 
 def which_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
