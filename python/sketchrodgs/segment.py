@@ -117,7 +117,7 @@ def segment_and_bind(
     if attach_size is None:
         attach_size = default_attach_size(polyline_length(polyline), radius)
     binding = part_and_attached(polyline, scene, radius, grow=grow, attach_size=attach_size if attach else None)
-    return _with_strays(binding, polyline, scene, radius) if attach else binding
+    return _with_strays(binding, polyline, scene, radius, attach_size) if attach else binding
 
 
 def part_and_attached(
@@ -144,9 +144,12 @@ def part_and_attached(
     return Binding(ids, segment, t, offset, distance, attached)
 
 
-def _with_strays(binding: Binding, polyline: np.ndarray, scene: GaussianScene, radius: float) -> Binding:
-    """`binding` and the strays around it (see the module docstring), each bound as an attached
-    Gaussian at the `(segment, t)` of the moving Gaussian nearest it, with its own offset."""
+def _with_strays(
+    binding: Binding, polyline: np.ndarray, scene: GaussianScene, radius: float, attach_size: float
+) -> Binding:
+    """`binding` and the strays around it (see the module docstring; no larger than
+    `attach_size` either), each bound as an attached Gaussian at the `(segment, t)` of the moving
+    Gaussian nearest it, with its own offset."""
     # Along the rod the part's own reach (`grow` R) takes its halo; strays hang past the rod's ends
     # and around attached parts, so only the Gaussians there are searched around.
     arc = arc_lengths(polyline)
@@ -162,7 +165,7 @@ def _with_strays(binding: Binding, polyline: np.ndarray, scene: GaussianScene, r
     sample = moving[:: max(1, len(moving) // 500)]
     spacing = float(np.median(moving_tree.query(sample, k=5)[0][:, 4]))
     link = float(np.clip(LINK_SPACINGS * spacing, LINK_MIN * radius, LINK_MAX * radius))
-    reach, size = STRAY_REACH * radius, STRAY_SIZE * radius
+    reach, size = STRAY_REACH * radius, min(STRAY_SIZE * radius, attach_size)
     # unbound Gaussians near what moves, and as far again as a stray cluster may reach (its whole
     # cluster then lies in this region, unless it runs on further: then it is too large anyway)
     region = reach + size + link
