@@ -177,7 +177,6 @@ class Animation:
         if not (np.isfinite(friction) and friction >= 0):
             raise SketchRodGSError(f"friction: must be finite and >= 0, got {friction}")
         weight = _gravity(up, gravity)
-        self.scene = scene
         self.world = World()
         self.world.contact = ContactSettings(scene=contact, rods=contact, friction=float(friction))
         self.rods: list[Rod] = []

@@ -210,6 +210,10 @@ def run(args: argparse.Namespace) -> int:
             raise SimulationError(
                 f"{path}: {why} [{up.axis if up else ''} up: --clamp, --pin, or --gravity 0]"
             ) from None
+        # from here on the animation's own scene (the input's rows, then split needles' pieces)
+        # is all there is: let the input go, a copy of it as large (most of a 2 M SH-3 scene)
+        input_gaussians = len(scene)
+        del scene
         grab = vertex(args.grab)
         if not -len(grabbed) <= grab < len(grabbed):
             raise SketchRodGSError(f"grab vertex: {grab} is outside the rod's {len(grabbed)} vertices")
@@ -220,7 +224,7 @@ def run(args: argparse.Namespace) -> int:
             (out / "ply").mkdir()
             # the frames carry the split needles: the input's rows first, then the extra pieces
             source = {
-                "input_gaussians": len(scene),
+                "input_gaussians": input_gaussians,
                 "source": animation.rig.source.tolist(),
                 "note": "row i of each frame comes from row source[i] of the input scene (docs/deformation.md)",
             }
