@@ -364,6 +364,8 @@ def test_a_rod_is_the_worlds_own_handle_taking_lists_and_naming_bad_input():
     rod.set_velocities(np.zeros((7, 3), np.float32).tolist())
     for call, message in (
         (lambda: rod.grab(7, (0, 0, 0)), "vertex 7 is out of range for a rod of 7 vertices"),
+        (lambda: rod.clamp(2**70), "vertex 1180591620717411303424 is out of range"),
+        (lambda: rod.clamp(1.5), "vertex: expected an integer index, got 1.5"),
         (lambda: rod.move_grab((0, 0)), r"target: expected 3 values, got shape \(2,\)"),
         (lambda: rod.transform(np.eye(4)), r"rotation: expected a \(3, 3\) rotation matrix, got shape \(4, 4\)"),
         (lambda: rod.set_positions(np.zeros((7, 2))), r"positions: expected shape \(N, 3\), got \(7, 2\)"),

@@ -188,13 +188,18 @@ impl Rod {
         f(world.world.rod_mut(index).map_err(rod_err)?, &settings)
     }
 
-    /// `vertex` as an index into the rod; negative counts from the end.
-    fn vertex(&self, vertex: i64) -> PyResult<usize> {
+    /// `vertex` (an integer) as an index into the rod; negative counts from the end.
+    fn vertex(&self, vertex: &Bound<'_, PyAny>) -> PyResult<usize> {
         let n = self.vertices as i64;
-        if (-n..n).contains(&vertex) {
-            Ok(vertex.rem_euclid(n) as usize)
-        } else {
-            Err(SimulationError::new_err(format!("vertex {vertex} is out of range for a rod of {n} vertices")))
+        let shown = || vertex.repr().map_or_else(|_| "?".to_string(), |r| r.to_string());
+        let out_of_range =
+            || SimulationError::new_err(format!("vertex {} is out of range for a rod of {n} vertices", shown()));
+        match vertex.extract::<i64>() {
+            Ok(v) if (-n..n).contains(&v) => Ok(v.rem_euclid(n) as usize),
+            Ok(_) => Err(out_of_range()),
+            // an integer too large for i64 is out of range too; anything else is not a vertex
+            Err(_) if vertex.hasattr("__index__").unwrap_or(false) => Err(out_of_range()),
+            Err(_) => Err(SimulationError::new_err(format!("vertex: expected an integer index, got {}", shown()))),
         }
     }
 }
@@ -248,13 +253,13 @@ impl Rod {
     // ----- boundary conditions and interaction -----
 
     /// Holds `vertex`'s position and frame where they are (both ends: the app's default).
-    fn clamp(&self, py: Python<'_>, vertex: i64) -> PyResult<()> {
+    fn clamp(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>) -> PyResult<()> {
         self.set(py, vertex, Boundary::Clamped)
     }
 
     /// Holds `vertex`'s position (at `position` if given, reached over the next step).
     #[pyo3(signature = (vertex, position = None))]
-    fn pin(&self, py: Python<'_>, vertex: i64, position: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+    fn pin(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>, position: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
         let v = self.vertex(vertex)?;
         match position {
             None => self.set(py, vertex, Boundary::Pinned),
@@ -266,12 +271,12 @@ impl Rod {
     }
 
     /// Removes any pin or clamp of `vertex`.
-    fn free(&self, py: Python<'_>, vertex: i64) -> PyResult<()> {
+    fn free(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>) -> PyResult<()> {
         self.set(py, vertex, Boundary::Free)
     }
 
     /// Sets `vertex`'s boundary condition: "free", "pinned" or "clamped".
-    fn set_boundary(&self, py: Python<'_>, vertex: i64, kind: &str) -> PyResult<()> {
+    fn set_boundary(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>, kind: &str) -> PyResult<()> {
         let b = match kind {
             "free" => Boundary::Free,
             "pinned" => Boundary::Pinned,
@@ -307,7 +312,7 @@ impl Rod {
     fn move_clamp(
         &self,
         py: Python<'_>,
-        vertex: i64,
+        vertex: &Bound<'_, PyAny>,
         rotation: Option<&Bound<'_, PyAny>>,
         translation: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
@@ -316,14 +321,14 @@ impl Rod {
     }
 
     /// Twisting moment [N m] the rod exerts on the clamp of `vertex` about its tangent.
-    fn clamp_torque(&self, py: Python<'_>, vertex: i64) -> PyResult<f64> {
+    fn clamp_torque(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>) -> PyResult<f64> {
         let v = self.vertex(vertex)?;
         self.with(py, "clamp_torque", |rod| rod.clamp_torque(v).map_err(rod_err))
     }
 
     /// From the next step on, `vertex` follows `target` exactly (a hard position constraint;
     /// the frame stays free). The motion to the target happens within the next step.
-    fn grab(&self, py: Python<'_>, vertex: i64, target: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn grab(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>, target: &Bound<'_, PyAny>) -> PyResult<()> {
         let (v, t) = (self.vertex(vertex)?, vec3(target, "target")?);
         self.with_mut(py, "grab", |rod, _| rod.grab(v, t).map_err(rod_err))
     }
@@ -494,7 +499,7 @@ impl Rod {
 }
 
 impl Rod {
-    fn set(&self, py: Python<'_>, vertex: i64, boundary: Boundary) -> PyResult<()> {
+    fn set(&self, py: Python<'_>, vertex: &Bound<'_, PyAny>, boundary: Boundary) -> PyResult<()> {
         let v = self.vertex(vertex)?;
         self.with_mut(py, "set_boundary", |rod, _| rod.set_boundary(v, boundary).map_err(rod_err))
     }
