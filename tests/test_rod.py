@@ -374,6 +374,11 @@ def test_a_rod_is_the_worlds_own_handle_taking_lists_and_naming_bad_input():
     ):
         with pytest.raises(SimulationError, match=message):
             call()
+    other = World()
+    stranger = other.add(straight(5))  # id 0 there, as `first` was here
+    with pytest.raises(SimulationError, match="belongs to another world"):
+        world.remove(stranger)
+    assert len(other) == 1 and len(world) == 2
     world.remove(rod)
     assert "detached" in repr(rod)
     for call in (lambda: rod.positions, lambda: rod.index, lambda: rod.clamp(0), lambda: world.remove(rod)):

@@ -75,10 +75,13 @@ impl RodWorld {
     }
 
     /// Removes `rod` from the world; its handle is then detached.
-    fn remove(&mut self, rod: PyRef<'_, Rod>) -> PyResult<()> {
-        let index = self.index_of(rod.id).ok_or_else(removed)?;
-        self.world.remove(index).map_err(rod_err)?;
-        self.ids.remove(index);
+    fn remove(mut slf: PyRefMut<'_, Self>, rod: PyRef<'_, Rod>) -> PyResult<()> {
+        if rod.world.as_ptr() != slf.as_ptr() {
+            return Err(SimulationError::new_err("this rod belongs to another world"));
+        }
+        let index = slf.index_of(rod.id).ok_or_else(removed)?;
+        slf.world.remove(index).map_err(rod_err)?;
+        slf.ids.remove(index);
         Ok(())
     }
 
