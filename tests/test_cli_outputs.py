@@ -96,10 +96,10 @@ def test_a_failure_while_writing_leaves_no_output_folder_and_names_the_users_pat
 ):
     import sketchrodgs.video
 
-    def disk_full(path, frames, fps):
-        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    def disk_full(writer, frame):
+        raise OSError(errno.ENOSPC, "No space left on device", str(writer.path))
 
-    monkeypatch.setattr(sketchrodgs.video, "write_video", disk_full)
+    monkeypatch.setattr(sketchrodgs.video.VideoWriter, "append", disk_full)
     out = tmp_path / "anim"
     assert main(animate(ring_rod, out, "--duration", "0.2")) == 1
     assert one_line_error(capsys) == f"sketchrodgs animate: error: {out}: cannot write (No space left on device)"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -167,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import load_scene, save_scene
     from ..rod import RodParams
     from ..scene_identity import check_rod_scene
-    from ..video import write_video
+    from ..video import VideoWriter
     from ._outputs import Outputs
 
     with Outputs() as outputs:
@@ -230,28 +231,32 @@ def run(args: argparse.Namespace) -> int:
             }
             atomic_write_text(out / "ply" / "source.json", json.dumps(source) + "\n")
         totals: dict[str, float] = {}
-        images = []
         count = int(round(pull.total * args.fps))
         # only the rods' Gaussians move: the rest is projected and binned once (docs/rendering.md)
         renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows)
-        for frame in tqdm(animation.frames(pull, args.fps), total=count, unit="frame", desc="animate"):
+        with contextlib.ExitStack() as stack:
+            # frames go to the video as they come: a long or large video is never held in memory
+            video = stack.enter_context(VideoWriter(out / args.video, args.fps)) if args.video != "none" else None
+            for frame in tqdm(animation.frames(pull, args.fps), total=count, unit="frame", desc="animate"):
+                clock = time.perf_counter()
+                rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb_image)
+                frame.timings["render"] = time.perf_counter() - clock
+                clock = time.perf_counter()
+                save_png(out / "frames" / f"frame_{frame.index:04d}.png", rgb, compress_level=FRAME_PNG_LEVEL)
+                if args.ply:
+                    save_scene(animation.current_scene(), out / "ply" / f"frame_{frame.index:04d}.ply")
+                frame.timings["write"] = time.perf_counter() - clock
+                if video is not None:
+                    clock = time.perf_counter()
+                    video.append(rgb)
+                    frame.timings["video"] = time.perf_counter() - clock
+                for stage, seconds in frame.timings.items():
+                    totals[stage] = totals.get(stage, 0.0) + seconds
+            if not np.isfinite(animation.means).all():
+                raise SketchRodGSError("the simulation produced non-finite positions")
             clock = time.perf_counter()
-            rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb_image)
-            frame.timings["render"] = time.perf_counter() - clock
-            clock = time.perf_counter()
-            save_png(out / "frames" / f"frame_{frame.index:04d}.png", rgb, compress_level=FRAME_PNG_LEVEL)
-            if args.ply:
-                save_scene(animation.current_scene(), out / "ply" / f"frame_{frame.index:04d}.ply")
-            frame.timings["write"] = time.perf_counter() - clock
-            images.append(rgb)
-            for stage, seconds in frame.timings.items():
-                totals[stage] = totals.get(stage, 0.0) + seconds
-        if not np.isfinite(animation.means).all():
-            raise SketchRodGSError("the simulation produced non-finite positions")
-        if args.video != "none":
-            clock = time.perf_counter()
-            write_video(out / args.video, images, args.fps)
-            totals["video"] = time.perf_counter() - clock
+        if video is not None:  # closed as the block ended
+            totals["video"] = totals.get("video", 0.0) + time.perf_counter() - clock
         outputs.commit()
     rest = np.abs(animation.rods[0].positions - animation.rods[0].rest_positions).max()
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in totals.items())
