@@ -416,9 +416,10 @@ def test_spz_round_trips_through_ply_and_splat_writers(tmp_path, version):
     assert_same_rotations(lossy.quats, scene.quats, 0.999)
 
 
-def test_convert_command(tmp_path, capsys):
+def test_convert_command(tmp_path, capsys, caplog):
     assert main(["convert", str(BIKER), str(tmp_path / "biker.ply")]) == 0
     assert "Niantic SPZ" in capsys.readouterr().out
+    assert "+y up by the SPZ convention" in caplog.text and "give --up +y" in caplog.text  # a .ply does not say
     original, converted = load_scene(BIKER), load_scene(tmp_path / "biker.ply")
     np.testing.assert_array_equal(converted.means, original.means)
     np.testing.assert_array_equal(converted.sh, original.sh)

@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     import os
     from pathlib import Path
 
-    from ..io import FORMAT_NAMES, detect_format, load_scene, save_scene
+    from ..io import FORMAT_NAMES, detect_format, format_up, load_scene, save_scene
     from ._outputs import Outputs
 
     with Outputs() as outputs:
@@ -38,6 +38,19 @@ def run(args: argparse.Namespace) -> int:
             )
         save_scene(scene, staged)
         outputs.commit()
+    up = format_up(args.input)
+    if up is not None:
+        # the coordinates are kept (so is the scene's identity, which rod files check), but the
+        # written format does not say which way is up
+        logging.getLogger("sketchrodgs").warning(
+            "%s is %s up by %s; %s keeps its coordinates, and is guessed from its shape when read: "
+            "give --up %s to camera, render and view",
+            args.input,
+            up[0],
+            up[1],
+            args.output,
+            up[0],
+        )
     print(
         f"{args.input} ({FORMAT_NAMES[source_format]}) -> {args.output}: {len(scene):,} Gaussians, "
         f"SH degree {0 if splat else scene.sh_degree}, {os.path.getsize(args.output) / 1e6:.2f} MB"
