@@ -8,6 +8,7 @@ import re
 import numpy as np
 import plyfile
 
+from .. import _core
 from ..atomic import atomic_open
 from ..errors import SceneFormatError
 from ..scene import GaussianScene, sh_coefficient_count
@@ -200,7 +201,8 @@ def _float_vertex_table(path: str | os.PathLike[str]):
                 if not table.dtype.isnative:
                     table = table.astype(np.float32)
                 for out, w in zip(outputs, wanted):
-                    np.take(table, w, axis=1, out=out[row : row + rows])  # no temporary (fancy indexing makes one)
+                    # in Rust, row by row while it is in cache (a NumPy gather goes column by column)
+                    _core.gather_columns(table, w, out[row : row + rows])
         return outputs
 
     return names, gather

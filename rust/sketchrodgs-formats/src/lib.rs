@@ -3,7 +3,8 @@
 //! arrays (means, linear scales, unit w-first quaternions, opacities, SH coefficients), a block of
 //! splats per task in parallel.
 //!
-//! `summary` gives, in one parallel pass, what validating any scene's arrays needs.
+//! `summary` gives, in one parallel pass, what validating any scene's arrays needs; `table`
+//! gathers the columns of a binary PLY's rows.
 //!
 //! Only the per-splat arithmetic and gzip inflation live here; reading headers, checking sizes
 //! and naming what is wrong with a file are the caller's (the Python package's) work. Every
@@ -16,6 +17,7 @@ pub mod gzip;
 pub mod splat;
 pub mod spz;
 pub mod summary;
+pub mod table;
 
 /// Splats per parallel task: a task's inputs and outputs (about 1 MB at SH degree 3) stay in
 /// cache, and a million splats make enough tasks to keep every core busy.

@@ -1,10 +1,10 @@
 //! Bindings for `sketchrodgs-formats`: `_core.gunzip_into`, `_core.decode_spz`,
-//! `_core.decode_compressed_ply`, `_core.decode_splat`, `_core.scene_summary`. Decoders write into arrays the caller
+//! `_core.decode_compressed_ply`, `_core.decode_splat`, `_core.scene_summary`, `_core.gather_columns`. Decoders write into arrays the caller
 //! allocated.
 
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use sketchrodgs_formats::{SplatsMut, compressed_ply, gzip, splat, spz, summary};
+use sketchrodgs_formats::{SplatsMut, compressed_ply, gzip, splat, spz, summary, table};
 
 use crate::arrays::{as_rows, check_shape, contiguous, contiguous_mut};
 use crate::errors::SketchRodGSError;
@@ -12,6 +12,22 @@ use crate::pool::run_parallel;
 
 fn formats_err(err: impl std::fmt::Display) -> PyErr {
     SketchRodGSError::new_err(err.to_string())
+}
+
+/// For each row of `table` (R, W) float32, its values at `columns` in that order into the same row
+/// of `out` (R, len(columns)) float32 (`sketchrodgs_formats::table`).
+#[pyfunction]
+fn gather_columns(
+    py: Python<'_>,
+    table: &Bound<'_, PyArray2<f32>>,
+    columns: Vec<usize>,
+    out: &Bound<'_, PyArray2<f32>>,
+) -> PyResult<()> {
+    let table = table.try_readonly()?;
+    let width = table.shape()[1];
+    let mut out = out.try_readwrite()?;
+    let (table, out) = (contiguous(&table, "table")?, contiguous_mut(&mut out, "out")?);
+    run_parallel(py, "gather_columns", || table::gather_columns(table, width, &columns, out))?.map_err(formats_err)
 }
 
 /// Inflate the gzip member in `raw` (uint8) into `out` (uint8). Returns (bytes written, whether
@@ -170,5 +186,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(decode_compressed_ply, m)?)?;
     m.add_function(wrap_pyfunction!(decode_splat, m)?)?;
     m.add_function(wrap_pyfunction!(scene_summary, m)?)?;
+    m.add_function(wrap_pyfunction!(gather_columns, m)?)?;
     Ok(())
 }
