@@ -74,18 +74,15 @@ def nearest_axis(vector: npt.ArrayLike) -> str:
     return max(AXES, key=lambda name: float(np.dot(AXES[name], v)))
 
 
-def guess_up_axis(means: np.ndarray, file_up: tuple[str, str] | None = None) -> tuple[str, str]:
+def guess_up_axis(means: np.ndarray) -> tuple[str, str]:
     """Guess the up axis of a scene from the extent of its centres; returns (axis, reason).
 
-    Where the file's format fixes its axes (`file_up`: (axis, why), from `io.format_up`; SPZ
-    stores right-up-back, so +y), that axis. Otherwise a scene that is flat along one axis
-    (thinnest extent under FLAT_RATIO of the middle one) lies on it: that axis points up, with
-    its positive sign; else the scene stands along its longest axis, signed by convention
-    (CONVENTIONAL_UP): -y for y, the COLMAP convention of real captures, +z for z. The guess can
-    be wrong (a capture stored upside down); `--up` overrides it.
+    A scene that is flat along one axis (thinnest extent under FLAT_RATIO of the middle one) lies
+    on it: that axis points up, with its positive sign. Otherwise the scene stands along its
+    longest axis, signed by convention (CONVENTIONAL_UP): -y for y, the COLMAP convention of
+    real captures, +z for z. The guess can be wrong (a capture stored upside down); `--up`
+    overrides it.
     """
-    if file_up is not None:
-        return file_up[0], file_up[1]
     if len(means) == 0:
         return CONVENTIONAL_UP[1], "empty scene: the COLMAP convention"
     low, high = np.quantile(np.asarray(means, np.float64), [OUTER_FRACTION, 1 - OUTER_FRACTION], axis=0)
@@ -118,8 +115,8 @@ def scene_up(
     file_up: tuple[str, str] | None = None,
 ) -> Up:
     """The up direction to frame `scene` with: `given` (a name in AXES), else the training
-    `cameras`', else the guess from the file's format (`file_up`, see `io.format_up`) or the
-    scene's shape."""
+    `cameras`', else the axis the file's format fixes (`file_up`: (axis, why), from
+    `io.format_up`; SPZ's +y), else the guess from the scene's shape."""
     if given is not None:
         if given not in AXES:
             raise CameraError(f"up: expected one of {', '.join(AXES)}, got {given!r}")
@@ -128,7 +125,7 @@ def scene_up(
     if vector is not None:
         many = f"{len(cameras)} training cameras" if len(cameras) > 1 else "the camera"
         return Up(vector, nearest_axis(vector), "cameras", f"from {many}")
-    axis, reason = guess_up_axis(scene.means, file_up)
+    axis, reason = file_up if file_up is not None else guess_up_axis(scene.means)
     if cameras:
         reason += f" (the {len(cameras)} cameras disagree)"
     return Up(np.array(AXES[axis]), axis, "guess", f"guessed: {reason}")

@@ -169,14 +169,10 @@ def _with_strays(
     # unbound Gaussians near what moves, and as far again as a stray cluster may reach (its whole
     # cluster then lies in this region, unless it runs on further: then it is too large anyway)
     region = reach + size + link
-    axis32 = _f32(polyline)
-    farthest = float(binding.distance.max()) + region
     groups = [binding.attached, start & ~binding.attached, end & ~binding.attached]
     # around each end and the attached parts apart: one box around a long rope would hold it all
     boxes = [near_box(scene.means[binding.gaussian_ids[g]], scene.means, region) for g in groups if g.any()]
     rows = np.unique(np.concatenate(boxes))
-    segment_of, _, _ = _core.nearest_on_polyline(axis32, _f32(scene.means[rows]), farthest)
-    rows = rows[segment_of >= 0]
     rows = rows[~np.isin(rows, binding.gaussian_ids)]
     if len(rows) == 0:
         return binding
@@ -206,7 +202,9 @@ def _with_strays(
     joined = searched[nearest[goes]]
     segment, t = binding.segment[joined], binding.t[joined]
     centre = scene.means[stray_rows].astype(np.float64)
-    _, _, distance = _core.nearest_on_polyline(axis32, _f32(centre), farthest)
+    # no stray lies further from the axis than what moves, and a region more
+    farthest = float(binding.distance.max()) + region
+    _, _, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), farthest)
     strays = Binding(
         stray_rows.astype(np.int64),
         segment.astype(np.int32),

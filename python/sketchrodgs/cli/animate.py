@@ -208,9 +208,7 @@ def run(args: argparse.Namespace) -> int:
             # "rod K: no rest shape holds ..." from Animation: name the file, say what to change
             rod, _, why = str(err).partition(": ")
             path = args.rods[int(rod.split()[-1])] if rod.startswith("rod ") else "the rods"
-            raise SimulationError(
-                f"{path}: {why} [{up.axis if up else ''} up: --clamp, --pin, or --gravity 0]"
-            ) from None
+            raise SimulationError(f"{path}: {why} [{up.axis} up: --clamp, --pin, or --gravity 0]") from None
         # from here on the animation's own scene (the input's rows, then split needles' pieces)
         # is all there is: let the input go, a copy of it as large (most of a 2 M SH-3 scene)
         input_gaussians = len(scene)

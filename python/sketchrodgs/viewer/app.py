@@ -48,7 +48,6 @@ from .tabs import MODES, Tab, Tabs
 
 logger = logging.getLogger("sketchrodgs")
 
-UP_DIRECTIONS = AXES  # the scene's up, named as everywhere else
 # Up to this many Gaussians the rods' Gaussians are re-sent exactly every frame; above it they
 # move as per-segment nodes, so that the browser need not re-merge a large scene 60 times a
 # second (measured in benches/bench_viewer.py).
@@ -101,8 +100,8 @@ class ViewerApp:
         contact: bool = True,
         friction: float = 0.0,
     ) -> None:
-        if up not in UP_DIRECTIONS:
-            raise SketchRodGSError(f"up: expected one of {', '.join(UP_DIRECTIONS)}, got {up!r}")
+        if up not in AXES:
+            raise SketchRodGSError(f"up: expected one of {', '.join(AXES)}, got {up!r}")
         if splat_update == "auto":
             splat_update = "exact" if len(scene) <= AUTO_EXACT_LIMIT else "segments"
         if splat_update not in SPLAT_UPDATES:
@@ -112,7 +111,7 @@ class ViewerApp:
         if clamp not in CLAMPS:
             raise SketchRodGSError(f"clamp: expected one of {', '.join(CLAMPS)}, got {clamp!r}")
         self.scene = scene
-        self.up = np.array(UP_DIRECTIONS[up])
+        self.up = np.array(AXES[up])
         self.output_dir = Path(output_dir)
         self.splat_update = splat_update
         self.last_extraction: Extraction | None = None
