@@ -169,11 +169,17 @@ def _with_strays(
     # unbound Gaussians near what moves, and as far again as a stray cluster may reach (its whole
     # cluster then lies in this region, unless it runs on further: then it is too large anyway)
     region = reach + size + link
-    groups = [binding.attached, start & ~binding.attached, end & ~binding.attached]
-    # around each end and the attached parts apart: one box around a long rope would hold it all
-    boxes = [near_box(scene.means[binding.gaussian_ids[g]], scene.means, region) for g in groups if g.any()]
-    rows = np.unique(np.concatenate(boxes))
-    rows = rows[~np.isin(rows, binding.gaussian_ids)]
+    # one pass over the scene for the box around all of them, then the boxes around each end and
+    # the attached parts apart (the one box around a long rope would hold all of it)
+    rows = near_box(moving, scene.means, region)
+    centres = scene.means[rows]
+    inside = np.zeros(len(rows), bool)
+    for group in (binding.attached, start & ~binding.attached, end & ~binding.attached):
+        if group.any():
+            points = scene.means[binding.gaussian_ids[group]].astype(np.float64)
+            low, high = points.min(axis=0) - region, points.max(axis=0) + region
+            inside |= ((centres >= low) & (centres <= high)).all(axis=1)
+    rows = rows[inside & ~np.isin(rows, binding.gaussian_ids)]
     if len(rows) == 0:
         return binding
     points = scene.means[rows].astype(np.float64)
