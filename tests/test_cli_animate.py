@@ -320,3 +320,16 @@ def test_gravity_with_the_up_axis_keeps_the_shape_and_refuses_a_rod_that_cannot_
     assert len(err.splitlines()) == 1 and str(path) in err and "cannot carry its weight" in err
     assert "--gravity 0" in err and not (tmp_path / "h").exists()
     assert main([*args, "--pin", "0", "--up", "+y", "--gravity", "0", "-o", str(tmp_path / "h")]) == 0
+
+
+def test_gravity_is_on_where_the_file_format_fixes_up_and_off_where_it_is_only_guessed():
+    from argparse import Namespace
+
+    from sketchrodgs.cli.animate import _gravity_up
+
+    biker = str(DATA / "biker.spz")  # SPZ is right-up-back: +y is up by the format
+    up = _gravity_up(Namespace(gravity=9.81, scene=biker, up=None), load_scene(biker))
+    assert up is not None and up.axis == "+y" and up.source == "format"
+    assert _gravity_up(Namespace(gravity=0.0, scene=biker, up=None), load_scene(biker)) is None
+    ring = load_scene(data.sample("ring"))  # only guessed from its shape
+    assert _gravity_up(Namespace(gravity=9.81, scene="sample:ring", up=None), ring) is None

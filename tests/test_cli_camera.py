@@ -40,7 +40,7 @@ def test_the_default_camera_shows_the_scene_whole_and_upright(name, scenes):
     scene = scenes[name]
     path, axis, foot = UPRIGHT[name]
     up = scene_up(scene, file_up=format_up(path))
-    assert up.axis == axis and up.source == "guess"
+    assert up.axis == axis and up.source == ("format" if path.suffix == ".spz" else "guess")
     camera = frame_scene(scene, up.vector, width=WIDTH, height=HEIGHT)
     mask = covered(scene, camera)
     assert 0.05 <= mask.mean() <= 0.95
@@ -166,7 +166,7 @@ def test_info_reports_the_up_axis(capsys):
     assert up["axis"] == "+z" and up["source"] == "guess" and up["vector"] == [0, 0, 1]
     # an SPZ file's axes are fixed by its format (right-up-back), whatever its shape
     assert main(["info", str(DATA / "biker.spz")]) == 0
-    assert "up         +y  (guessed: the SPZ convention (right-up-back)" in capsys.readouterr().out
+    assert "up         +y  (by the SPZ convention (right-up-back); --up overrides)" in capsys.readouterr().out
 
 
 def test_help_lists_the_samples(capsys):

@@ -16,10 +16,12 @@ from sketchrodgs.rod import ContactSettings, Rod, World
 R = 0.01
 
 
-def slab(top: float = 0.0, size: float = 0.6, step: float = 0.004) -> GaussianScene:
-    """A table top of Gaussians: a square of flat, opaque Gaussians 2 steps thick, its top at `top`."""
+def slab(top: float = 0.0, size: float = 0.6, step: float = 0.004, width: float | None = None) -> GaussianScene:
+    """A table top of Gaussians: `size` by `width` (default: square) of round, opaque Gaussians of
+    sigma `step`, `step` apart, in 2 layers, their top row of centres a step under `top`."""
     u = np.arange(-size / 2, size / 2, step)
-    x, y, z = np.meshgrid(u, u, [top - step, top - 2 * step], indexing="ij")
+    v = u if width is None else np.arange(-width / 2, width / 2, step)
+    x, y, z = np.meshgrid(u, v, [top - step, top - 2 * step], indexing="ij")
     means = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
     n = len(means)
     return GaussianScene.from_colors(
@@ -69,6 +71,29 @@ def test_a_rod_pulled_into_a_slab_of_gaussians_stays_on_it():
             assert lowest >= R - 0.05 * R - field.spacing, lowest / R
         else:
             assert rod.positions[20][2] < -10 * R  # through the slab
+
+
+def test_a_rod_pulled_through_a_slab_stays_on_its_top_with_cells_of_a_radius():
+    """Issue 20's measure: a 1 m rod of R = 1 cm, 4 R above a slab of Gaussians (sigma R / 2, R / 2
+    apart; they reach alpha 0.5 between 0.06 R under and 0.07 R over z = 0), its middle pulled 20 R
+    down. The field's cells are then about a radius; its surface, found along the grid lines, keeps
+    the rod's surface within 0.05 R of z = 0 in every frame."""
+    scene = slab(size=1.2, width=0.4, step=R / 2)
+    rest = np.stack([np.linspace(-0.5, 0.5, 200), np.zeros(200), np.full(200, 4 * R)], axis=1)
+    field = scene_field(scene, [rest], [R])
+    assert field is not None and field.spacing > R
+    world = World()
+    world.set_scene_field(field.values, field.origin, field.spacing)
+    rod = Rod(rest, radius=R, world=world)
+    rod.clamp(0)
+    rod.clamp(-1)
+    lowest = np.inf
+    for frame in range(1, 91):
+        rod.grab(100, (0.0, 0.0, 4 * R - 24 * R * min(frame / 60, 1.0)))
+        assert world.step(1 / 60)[0].converged
+        x = rod.positions
+        lowest = min(lowest, float(np.concatenate([x[:, 2], 0.5 * (x[1:, 2] + x[:-1, 2])]).min()) - R)
+    assert lowest >= -0.05 * R, lowest / R
 
 
 def _plant() -> tuple[GaussianScene, Extraction]:

@@ -86,6 +86,18 @@ def max_alpha(
     spacing: float,
     dims: tuple[int, int, int] | list[int],
 ) -> npt.NDArray[np.float32]: ...
+def max_alpha_along_edges(
+    means: npt.NDArray[np.float32],
+    scales: npt.NDArray[np.float32],
+    quats: npt.NDArray[np.float32],
+    opacities: npt.NDArray[np.float32],
+    rows: npt.NDArray[np.int64],
+    origin: tuple[float, float, float] | list[float],
+    spacing: float,
+    dims: tuple[int, int, int] | list[int],
+    edges: npt.NDArray[np.int64],
+    samples: int,
+) -> npt.NDArray[np.float32]: ...
 def rasterize(
     means: npt.NDArray[np.float32],
     scales: npt.NDArray[np.float32],

@@ -12,13 +12,14 @@ solid parts, built from its Gaussians around the rods' reach, for `World.set_sce
    object must meet its inside as solid too. Non-solid cells that do not connect to the grid's
    border are solid.
 5. The signed distance, negative inside, in scene units: next to the boundary from where alpha
-   crosses `SOLID_ALPHA` between nodes (sub-cell), further away by Euclidean distance transforms
-   (scipy) to those nodes.
+   crosses `SOLID_ALPHA` along the grid lines between nodes (sampled `EDGE_SAMPLES` times along
+   each line that crosses, in Rust), further away by Euclidean distance transforms (scipy) to
+   those nodes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,10 @@ MAX_CELLS = 2_000_000
 CARVE_RADII = 2.0
 REACH_SHARE = 0.5
 MARGIN_RADII = 4.0
+# Where the boundary crosses a grid line, the Gaussians' alpha is sampled this many times along it:
+# interpolated linearly between two nodes a cell (about a radius) apart, the crossing was off by
+# up to 0.07 R, and a rod sank that far into a slab (docs/contact.md).
+EDGE_SAMPLES = 8
 
 
 @dataclass(frozen=True)
@@ -91,16 +96,13 @@ def scene_field(
     rows = rows[keep[rows]]
     if len(rows) == 0:
         return None
-    alpha = _core.max_alpha(  # of the rows in place: no copy of the scene's arrays
-        np.ascontiguousarray(scene.means),
-        np.ascontiguousarray(scene.scales),
-        np.ascontiguousarray(scene.quats),
-        np.ascontiguousarray(scene.opacities),
-        rows.astype(np.int64),
-        [float(v) for v in low],
-        float(spacing),
-        [int(v) for v in dims],
-    ).reshape(dims[2], dims[1], dims[0])
+    # the rows in place: no copy of the scene's arrays
+    means, scales = np.ascontiguousarray(scene.means), np.ascontiguousarray(scene.scales)
+    quats, opacities = np.ascontiguousarray(scene.quats), np.ascontiguousarray(scene.opacities)
+    rows = rows.astype(np.int64)
+    origin, cells = [float(v) for v in low], [int(v) for v in dims]
+    alpha = _core.max_alpha(means, scales, quats, opacities, rows, origin, float(spacing), cells)
+    alpha = alpha.reshape(dims[2], dims[1], dims[0])
     solid = alpha >= SOLID_ALPHA
     carved = _carved(rest, radii, low, spacing, dims)
     solid &= ~carved
@@ -113,19 +115,31 @@ def scene_field(
     )
     enclosed = ~solid & ~np.isin(labels, border[border > 0]) & ~carved
     solid |= enclosed
-    values = (_signed_distance(alpha, solid) * spacing).astype(np.float32)
+
+    def along_edges(edges: np.ndarray) -> np.ndarray:
+        return _core.max_alpha_along_edges(
+            means, scales, quats, opacities, rows, origin, float(spacing), cells, edges, EDGE_SAMPLES
+        )
+
+    values = (_signed_distance(alpha, solid, along_edges) * spacing).astype(np.float32)
     return SceneField(values, low.astype(np.float64), float(spacing), solid)
 
 
-def _signed_distance(alpha: np.ndarray, solid: np.ndarray) -> np.ndarray:
+def _signed_distance(
+    alpha: np.ndarray, solid: np.ndarray, along_edges: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
     """(nz, ny, nx) signed distance in cells to the boundary of `solid`, negative inside, placed
-    between nodes where `alpha` crosses SOLID_ALPHA (a cell is about a radius: half a cell of
-    error would sink a rod half a radius into a table).
+    between nodes where the Gaussians' alpha crosses SOLID_ALPHA (a cell is about a radius: half a
+    cell of error would sink a rod half a radius into a table).
 
     Nodes next to the boundary take the distance to the plane through its crossings on the grid
-    lines around them (axis intercepts d_x, d_y, d_z: 1 / sqrt(sum 1 / d^2)); crossings next to
-    carved or filled cells, which alpha does not describe, are half-way. Every other node adds
-    its distance to the nearest such node of its side (Euclidean distance transforms).
+    lines around them (axis intercepts d_x, d_y, d_z: 1 / sqrt(sum 1 / d^2)). Each node takes the
+    crossing nearest it on a line, found by `along_edges` ((E, 4) node i, j, k and axis ->
+    (E, EDGE_SAMPLES + 1) alpha along the line). Lines whose ends alpha does not describe as their
+    nodes are (carved or filled nodes, or a Gaussian thinner than a cell counted at the node
+    holding its centre) take the linear interpolation of the node values, or half-way. Every
+    other node adds its distance to the nearest such node of its side (Euclidean distance
+    transforms).
     """
     described = solid == (alpha >= SOLID_ALPHA)
     inverse = np.zeros(alpha.shape, np.float32)  # sum over axes of 1 / (intercept in cells)^2
@@ -138,9 +152,18 @@ def _signed_distance(alpha: np.ndarray, solid: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t = (SOLID_ALPHA - alpha[a]) / (alpha[b] - alpha[a])  # from node a towards node b
         t = np.where(crossing & described[a] & described[b] & (t >= 0) & (t <= 1), t, 0.5)
+        from_a, from_b = t, 1 - t  # how far the crossing nearest each node lies, in cells
+        lines = crossing & described[a] & described[b]
+        if lines.any():
+            nodes = np.argwhere(lines)  # (k, j, i) of node a
+            edges = np.ascontiguousarray(np.column_stack([nodes[:, ::-1], np.full(len(nodes), 2 - axis)]), np.int64)
+            near_a, near_b = _nearest_crossings(along_edges(edges), solid[a][lines])
+            from_a, from_b = from_a.copy(), from_b.copy()
+            from_a[lines] = np.where(np.isnan(near_a), from_a[lines], near_a)
+            from_b[lines] = np.where(np.isnan(near_b), from_b[lines], near_b)
         nearest = np.zeros(alpha.shape, np.float32)  # the nearest crossing along this axis, either side
-        nearest[a] = np.where(crossing, 1 / np.maximum(t, 1e-3) ** 2, 0.0)
-        nearest[b] = np.maximum(nearest[b], np.where(crossing, 1 / np.maximum(1 - t, 1e-3) ** 2, 0.0))
+        nearest[a] = np.where(crossing, 1 / np.maximum(from_a, 1e-3) ** 2, 0.0)
+        nearest[b] = np.maximum(nearest[b], np.where(crossing, 1 / np.maximum(from_b, 1e-3) ** 2, 0.0))
         inverse += nearest
     band = inverse > 0
     near = np.zeros(alpha.shape, np.float32)
@@ -154,6 +177,35 @@ def _signed_distance(alpha: np.ndarray, solid: np.ndarray) -> np.ndarray:
         gap, (iz, iy, ix) = ndimage.distance_transform_edt(~seeds, return_indices=True)
         out[side] = sign * (gap + near[iz, iy, ix])[side]
     return out
+
+
+def _nearest_crossings(profile: np.ndarray, start_solid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From (E, S + 1) alpha sampled along grid lines from node a to node b, one of them solid
+    (`start_solid`: node a): how far (in cells) the crossing of SOLID_ALPHA nearest node a lies
+    from it, and the one nearest node b from b, each interpolated between the two samples around
+    it.
+
+    A Gaussian thinner than a cell makes the node nearest its centre solid though its alpha there
+    is lower. Where the line meets it, its crossings are still found along the line; where the
+    line does not, the solid node is where it ends (distance 0 from that node), not half-way to
+    the next. NaN where neither holds (a carved or filled node): the caller keeps its estimate."""
+    samples = profile.shape[1] - 1
+    inside = profile >= SOLID_ALPHA
+    crosses = inside.any(axis=1) & ~inside.all(axis=1)
+    flips = inside[:, 1:] != inside[:, :-1]  # (E, S): the crossing lies between samples s and s + 1
+    first = np.argmax(flips, axis=1)
+    last = samples - 1 - np.argmax(flips[:, ::-1], axis=1)
+
+    def at(s: np.ndarray) -> np.ndarray:
+        rows = np.arange(len(profile))
+        low, high = profile[rows, s], profile[rows, s + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            part = np.clip((SOLID_ALPHA - low) / (high - low), 0.0, 1.0)
+        return (s + np.nan_to_num(part, nan=0.5)) / samples
+
+    # nothing on the line reaches SOLID_ALPHA: the solid node holds a thin Gaussian's centre
+    at_a = np.where(start_solid, 0.0, 1.0)
+    return np.where(crosses, at(first), at_a), np.where(crosses, 1 - at(last), 1 - at_a)
 
 
 def _carved(

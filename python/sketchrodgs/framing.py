@@ -53,7 +53,7 @@ class Up:
     Attributes:
         vector: (3,) unit vector.
         axis: the nearest of AXES ("+x" ... "-z").
-        source: "given", "cameras" or "guess".
+        source: "given", "cameras", "format" (the file's format fixes its axes: SPZ) or "guess".
         reason: one line for people ("from 12 training cameras", "guessed: stands tallest along y; ...").
     """
 
@@ -64,7 +64,8 @@ class Up:
 
     @property
     def known(self) -> bool:
-        """Given or from cameras, not guessed from the shape: enough to turn gravity on."""
+        """Given, from cameras or from the format, not guessed from the shape: enough to turn
+        gravity on."""
         return self.source != "guess"
 
 
@@ -125,7 +126,10 @@ def scene_up(
     if vector is not None:
         many = f"{len(cameras)} training cameras" if len(cameras) > 1 else "the camera"
         return Up(vector, nearest_axis(vector), "cameras", f"from {many}")
-    axis, reason = file_up if file_up is not None else guess_up_axis(scene.means)
+    if file_up is not None:
+        axis, reason = file_up
+        return Up(np.array(AXES[axis]), axis, "format", f"by {reason}")
+    axis, reason = guess_up_axis(scene.means)
     if cameras:
         reason += f" (the {len(cameras)} cameras disagree)"
     return Up(np.array(AXES[axis]), axis, "guess", f"guessed: {reason}")

@@ -132,8 +132,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     scene.add_argument(
         "--up",
         choices=UP_CHOICES,
-        help="the scene's up axis, for gravity (default: the scene folder's training cameras'; without "
-        "them, no gravity)",
+        help="the scene's up axis, for gravity (default: the scene folder's training cameras', or the "
+        "format's (SPZ: +y); without either, no gravity)",
     )
     scene.add_argument(
         "--gravity",
@@ -269,13 +269,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _gravity_up(args: argparse.Namespace, scene: GaussianScene) -> Up | None:
     """The up direction gravity acts against: --up, else the training cameras' of a 3DGS output
-    folder; None without either (a guess from the scene's shape is not enough to pull rods by)."""
+    folder, else the one the file's format fixes (SPZ); None without any (a guess from the
+    scene's shape is not enough to pull rods by)."""
     from ..camera import load_cameras
     from ..framing import scene_up
-    from ..io import training_cameras
+    from ..io import format_up, training_cameras
 
     if args.gravity == 0:
         return None
     found = training_cameras(args.scene)
-    up = scene_up(scene, load_cameras(found) if found else [], args.up)
+    up = scene_up(scene, load_cameras(found) if found else [], args.up, format_up(args.scene))
     return up if up.known else None

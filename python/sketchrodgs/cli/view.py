@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     # a rod file's damping, density and gravity; its stiffness follows from the swing period
     saved = loaded[0][1] if loaded else {}
     default = Material()
-    # gravity on where the up direction is known (given, or the training cameras'), not guessed
+    # gravity on where the up direction is known (given, the training cameras' or the format's), not guessed
     down = [-GRAVITY * v for v in AXES[up.axis]] if up.known else default.gravity
     g = [float(v) for v in saved.get("gravity", down)]
     material = Material(

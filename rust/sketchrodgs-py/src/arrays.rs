@@ -1,16 +1,18 @@
 //! Checks shared by the bindings: shapes and contiguity of incoming numpy arrays, named in errors.
 
-use numpy::{PyReadonlyArray, PyReadwriteArray};
+use numpy::{PyReadonlyArray, PyReadwriteArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 use crate::errors::SketchRodGSError;
 
-/// A C-contiguous view of `array`, or an error that names it.
+/// A C-contiguous view of `array`, or an error that names it. (`as_slice` alone also takes a
+/// Fortran-ordered array, whose rows the callers would then read as columns.)
 pub fn contiguous<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
     array: &'a PyReadonlyArray<'_, T, D>,
     name: &str,
 ) -> PyResult<&'a [T]> {
-    array.as_slice().map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
+    let slice = array.is_c_contiguous().then(|| array.as_slice().ok()).flatten();
+    slice.ok_or_else(|| not_contiguous(name))
 }
 
 /// A C-contiguous mutable view of `array`, or an error that names it.
@@ -18,7 +20,14 @@ pub fn contiguous_mut<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
     array: &'a mut PyReadwriteArray<'_, T, D>,
     name: &str,
 ) -> PyResult<&'a mut [T]> {
-    array.as_slice_mut().map_err(|_| SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array")))
+    if !array.is_c_contiguous() {
+        return Err(not_contiguous(name));
+    }
+    array.as_slice_mut().map_err(|_| not_contiguous(name))
+}
+
+fn not_contiguous(name: &str) -> PyErr {
+    SketchRodGSError::new_err(format!("{name}: expected a C-contiguous array"))
 }
 
 /// Check `shape` against `expected`, where `None` matches any length.

@@ -5,7 +5,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadwriteArray2, 
 use pyo3::prelude::*;
 use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
 
-use crate::arrays::{as_rows, check_shape, contiguous};
+use crate::arrays::{as_rows, check_shape, contiguous, contiguous_mut};
 use crate::errors::{PathNotFoundError, SketchRodGSError};
 use crate::pool::run_parallel;
 
@@ -192,7 +192,7 @@ impl<'py> RegionArgs<'py> {
     /// Write the reads outside the rendered tiles into `missed`.
     fn report(mut self) -> PyResult<()> {
         if let (Some(rendered), Some(missed)) = (&self.rendered, &mut self.missed) {
-            let out = missed.as_slice_mut().map_err(|_| SketchRodGSError::new_err("missed: must be C-contiguous"))?;
+            let out = contiguous_mut(missed, "missed")?;
             for (o, m) in out.iter_mut().zip(rendered.missed()) {
                 *o |= m;
             }
