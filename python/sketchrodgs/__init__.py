@@ -37,6 +37,7 @@ _EXPORTS = {
     "World": "rod",
     "extract_rod": "extract",
     "load_cameras": "camera",
+    "load_rod": "extract",
     "load_scene": "io",
     "render": "render",
     "save_scene": "io",
@@ -62,6 +63,7 @@ __all__ = [
     "data",
     "extract_rod",
     "load_cameras",
+    "load_rod",
     "load_scene",
     "render",
     "save_scene",
@@ -102,7 +104,7 @@ if TYPE_CHECKING:
     from . import data
     from .camera import Camera, load_cameras
     from .errors import CameraError, PathNotFoundError, SceneFormatError, SimulationError, SketchRodGSError
-    from .extract import Extraction, extract_rod
+    from .extract import Extraction, extract_rod, load_rod
     from .io import load_scene, save_scene
     from .render import RenderResult, render
     from .rig import Rig
