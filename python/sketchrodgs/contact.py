@@ -135,11 +135,9 @@ def _signed_distance(
     Nodes next to the boundary take the distance to the plane through its crossings on the grid
     lines around them (axis intercepts d_x, d_y, d_z: 1 / sqrt(sum 1 / d^2)). Each node takes the
     crossing nearest it on a line, found by `along_edges` ((E, 4) node i, j, k and axis ->
-    (E, EDGE_SAMPLES + 1) alpha along the line). Lines whose ends alpha does not describe as their
-    nodes are (carved or filled nodes, or a Gaussian thinner than a cell counted at the node
-    holding its centre) take the linear interpolation of the node values, or half-way. Every
-    other node adds its distance to the nearest such node of its side (Euclidean distance
-    transforms).
+    (E, EDGE_SAMPLES + 1) alpha along the line); a line next to a carved or filled node, which
+    alpha does not describe, crosses half-way. Every other node adds its distance to the nearest
+    such node of its side (Euclidean distance transforms).
     """
     described = solid == (alpha >= SOLID_ALPHA)
     inverse = np.zeros(alpha.shape, np.float32)  # sum over axes of 1 / (intercept in cells)^2
@@ -149,18 +147,14 @@ def _signed_distance(
         first[axis], second[axis] = slice(None, -1), slice(1, None)
         a, b = tuple(first), tuple(second)
         crossing = solid[a] != solid[b]
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t = (SOLID_ALPHA - alpha[a]) / (alpha[b] - alpha[a])  # from node a towards node b
-        t = np.where(crossing & described[a] & described[b] & (t >= 0) & (t <= 1), t, 0.5)
-        from_a, from_b = t, 1 - t  # how far the crossing nearest each node lies, in cells
+        # how far the crossing nearest each node lies from it, in cells
+        from_a = np.full(crossing.shape, 0.5, np.float64)
+        from_b = from_a.copy()
         lines = crossing & described[a] & described[b]
         if lines.any():
             nodes = np.argwhere(lines)  # (k, j, i) of node a
             edges = np.ascontiguousarray(np.column_stack([nodes[:, ::-1], np.full(len(nodes), 2 - axis)]), np.int64)
-            near_a, near_b = _nearest_crossings(along_edges(edges), solid[a][lines])
-            from_a, from_b = from_a.copy(), from_b.copy()
-            from_a[lines] = np.where(np.isnan(near_a), from_a[lines], near_a)
-            from_b[lines] = np.where(np.isnan(near_b), from_b[lines], near_b)
+            from_a[lines], from_b[lines] = _nearest_crossings(along_edges(edges), solid[a][lines])
         nearest = np.zeros(alpha.shape, np.float32)  # the nearest crossing along this axis, either side
         nearest[a] = np.where(crossing, 1 / np.maximum(from_a, 1e-3) ** 2, 0.0)
         nearest[b] = np.maximum(nearest[b], np.where(crossing, 1 / np.maximum(from_b, 1e-3) ** 2, 0.0))
@@ -188,7 +182,7 @@ def _nearest_crossings(profile: np.ndarray, start_solid: np.ndarray) -> tuple[np
     A Gaussian thinner than a cell makes the node nearest its centre solid though its alpha there
     is lower. Where the line meets it, its crossings are still found along the line; where the
     line does not, the solid node is where it ends (distance 0 from that node), not half-way to
-    the next. NaN where neither holds (a carved or filled node): the caller keeps its estimate."""
+    the next."""
     samples = profile.shape[1] - 1
     inside = profile >= SOLID_ALPHA
     crosses = inside.any(axis=1) & ~inside.all(axis=1)
