@@ -5,7 +5,9 @@ clamped ends eased), cropped around the rod, with the needle and tear fractions 
 
     python benches/pull_gallery.py OUT_DIR [--case guitar_neck/az270 ...]
 
-Each pull is written to OUT_DIR/pull_<case>.png.
+Each pull is written to OUT_DIR/pull_<case>.png. OUT_DIR/pull_free_tip.png is the bundled plant's
+stem held at its base only, its tip free: before and after what continues the stem past the
+stroke rides with the tip (docs/deformation.md, "Continuations").
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from sketchrodgs import render
+from sketchrodgs import data, extract_rod, load_scene, render, segment
+from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.images import save_png, to_uint8
 from sketchrodgs.realcases import load_cases
 from sketchrodgs.realpulls import PULLS, PullResult, pull_case
@@ -41,6 +44,45 @@ def panel(scene, result: PullResult, box, caption: str) -> Image.Image:
     out.paste(image, (0, 22))
     ImageDraw.Draw(out).text((4, 5), caption, fill=(0, 0, 0))
     return out
+
+
+def free_tip(out: Path) -> None:
+    """The bundled stem held at its base, its middle dragged 25 px right and 45 px up, held."""
+    scene, camera = load_scene(data.sample("plant")), data.sample_camera("plant")
+    box = (430, 180, 730, 420)
+
+    def pulled(continuations: bool) -> np.ndarray:
+        keep = segment._with_continuations
+        if not continuations:
+            segment._with_continuations = lambda binding, *_: binding  # as before they were taken
+        try:
+            extraction = extract_rod(scene, camera, data.sample_stroke("plant"))
+        finally:
+            segment._with_continuations = keep
+        middle = len(extraction.polyline) // 2
+        drag = tuple(camera.screen_offset(extraction.polyline[middle], (25, -45)))
+        animation = Animation(scene, [extraction], clamp="start")
+        for _ in animation.frames(Pull(vertex=middle, offset=drag, duration=0.4, hold=0.3, release=False), fps=30):
+            pass  # held out
+        return render(animation.current_scene(), camera).rgb
+
+    panels = []
+    for rgb, caption in (
+        (render(scene, camera).rgb, "the bundled stem at rest"),
+        (pulled(False), "held at its base, before: its tip stays"),
+        (pulled(True), "now: the tip and its leaves follow"),
+    ):
+        image = Image.fromarray(to_uint8(rgb)).crop(box)
+        image = image.resize((WIDTH, round(image.height * WIDTH / image.width)), Image.LANCZOS)
+        framed = Image.new("RGB", (image.width, image.height + 22), "white")
+        framed.paste(image, (0, 22))
+        ImageDraw.Draw(framed).text((4, 5), caption, fill=(0, 0, 0))
+        panels.append(framed)
+    sheet = Image.new("RGB", (sum(p.width for p in panels) + 8 * (len(panels) - 1), panels[0].height), "white")
+    for k, p in enumerate(panels):
+        sheet.paste(p, (k * (p.width + 8), 0))
+    save_png(out / "pull_free_tip.png", np.asarray(sheet))
+    print(f"{out / 'pull_free_tip.png'}: the free tip")
 
 
 def main() -> None:
@@ -75,6 +117,7 @@ def main() -> None:
             f"{path}: before needles {old.needles:.2%} tears {old.tears:.2%}; now needles {new.needles:.2%} "
             f"tears {new.tears:.2%}"
         )
+    free_tip(args.out)
 
 
 if __name__ == "__main__":

@@ -122,3 +122,31 @@ def test_the_plant_stem_takes_its_leaves(pulls):
     now, _ = pulls["plant_side_stem_left"]
     binding = now.extraction.binding
     assert binding.attached.sum() > (~binding.attached).sum()  # its leaves outweigh the stem
+
+
+def test_a_free_tip_carries_the_stem_and_leaves_past_the_stroke_and_a_clamped_one_holds_them():
+    """The bundled plant's stroke stops short of its stem's tip: past the rod's end the stem runs
+    on with three leaves (docs/deformation.md, "Continuations"). Held at its base only, the stem's
+    tip carries them along; held at both ends, they stay still."""
+    from sketchrodgs import data, extract_rod, load_scene
+    from sketchrodgs.animate import Animation, Pull
+
+    scene, camera = load_scene(data.sample("plant")), data.sample_camera("plant")
+    extraction = extract_rod(scene, camera, data.sample_stroke("plant"))
+    b = extraction.binding
+    tip = b.gaussian_ids[b.attached & (b.segment == len(extraction.polyline) - 2) & (b.t == 1)]
+    assert len(tip) > 1000  # the stem's tip and its leaves
+    middle = len(extraction.polyline) // 2
+    drag = tuple(camera.screen_offset(extraction.polyline[middle], (-40, 0)))
+    for clamp in ("start", "both"):
+        animation = Animation(scene, [extraction], clamp=clamp)
+        rest_end = np.array(animation.rods[0].positions[-1])
+        for _ in animation.frames(Pull(vertex=middle, offset=drag, duration=0.3, hold=0.1, release=False), fps=30):
+            pass  # held out
+        end_moved = np.linalg.norm(np.array(animation.rods[0].positions[-1]) - rest_end)
+        tip_moved = np.linalg.norm(animation.means[tip] - scene.means[tip], axis=1)
+        if clamp == "start":
+            assert end_moved > 10 * extraction.radius
+            assert np.median(tip_moved) > 0.5 * end_moved  # they go with the end, turning with it
+        else:
+            assert end_moved < 1e-6 and tip_moved.max() < 1e-6

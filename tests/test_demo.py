@@ -33,7 +33,8 @@ def test_demo_writes_everything_it_promises(tmp_path):
     stroke = data.sample_stroke("plant")
     gaps = np.min(np.linalg.norm(uv[:, None] - stroke[None], axis=2), axis=1)
     assert np.median(gaps) < 15, gaps
-    assert 300 < len(load_rod(out / "rod.json")[0].gaussian_ids) < len(load_scene(data.sample("plant"))) // 20
+    # the stem with its leaves, and its tip past the stroke with the tip's leaves: not the plant
+    assert 300 < len(load_rod(out / "rod.json")[0].gaussian_ids) < len(load_scene(data.sample("plant"))) // 10
     # the pulled frame differs from the view where the stem is, and the last frame is back at rest
     view, pulled, last = (
         np.asarray(Image.open(out / n), np.int16) for n in ("view.png", "pulled.png", "frames/frame_0060.png")

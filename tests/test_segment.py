@@ -254,3 +254,27 @@ def test_bad_input_is_a_clear_error():
         segment_and_bind(AXIS, scene, R, grow=-1.0)
     with pytest.raises(ValueError, match="attach_size must be finite"):
         segment_and_bind(AXIS, scene, R, attach_size=float("inf"))
+
+
+def test_what_continues_the_part_past_an_end_goes_with_it_unless_it_runs_on():
+    # the stroke stopped short of both ends of the tube (it runs on to |x| = 0.5 with its caps): a
+    # rod from x = -0.2 to 0.32 (L 0.52, so continuations up to 20 R); past its end the tube runs
+    # on 18 R with a leaf at its tip, past its start 30 R (the rest of the plant)
+    rod = AXIS[(AXIS[:, 0] >= -0.2 - 1e-9) & (AXIS[:, 0] <= 0.32 + 1e-9)]
+    leaf = grid((0.45, 0.05 - 0.3 * R, -0.5 * R), (0.45 + 3 * R, 0.05 + 0.3 * R, 0.5 * R), 0.002)
+    scene, rows = with_extras(leaf=leaf)
+    binding = segment_and_bind(rod, scene, R)
+    means = scene.means.astype(np.float64)
+    attached = binding.gaussian_ids[binding.attached]
+    tube_past_end = np.flatnonzero(means[: rows["leaf"].start, 0] > 0.32 + 3 * R)
+    tube_past_start = np.flatnonzero(means[: rows["leaf"].start, 0] < -0.2 - 3 * R)
+    leaf_rows = np.arange(len(scene))[rows["leaf"]]
+    assert np.isin(tube_past_end, attached).all() and np.isin(leaf_rows, attached).all()
+    assert not np.isin(tube_past_start, binding.gaussian_ids).any()
+    # bound at the end itself: a clamped end holds them still, a free one carries them
+    at_end = np.isin(binding.gaussian_ids, leaf_rows)
+    assert (binding.segment[at_end] == len(rod) - 2).all() and (binding.t[at_end] == 1).all()
+    # a size given bounds them too, and without attached parts nothing continues
+    small = segment_and_bind(rod, scene, R, attach_size=4 * R)
+    assert not np.isin(leaf_rows, small.gaussian_ids).any()
+    assert not np.isin(leaf_rows, segment_and_bind(rod, scene, R, attach=False).gaussian_ids).any()

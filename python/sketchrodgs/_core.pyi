@@ -68,6 +68,14 @@ def estimate_radius(
 def nearest_on_polyline(
     polyline: npt.NDArray[np.float32], points: npt.NDArray[np.float32], reach: float
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+def continuation(
+    points: npt.NDArray[np.float32],
+    seeds: npt.NDArray[np.int64],
+    vertex: tuple[float, float, float],
+    outward: tuple[float, float, float],
+    size: float,
+    link: float,
+) -> npt.NDArray[np.int64]: ...
 def cross_section_centroids(
     axis: npt.NDArray[np.float64],
     tangents: npt.NDArray[np.float64],

@@ -193,7 +193,7 @@ def _nearest_crossings(profile: np.ndarray, start_solid: np.ndarray) -> tuple[np
     def at(s: np.ndarray) -> np.ndarray:
         rows = np.arange(len(profile))
         low, high = profile[rows, s], profile[rows, s + 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # lines that do not cross
             part = np.clip((SOLID_ALPHA - low) / (high - low), 0.0, 1.0)
         return (s + np.nan_to_num(part, nan=0.5)) / samples
 

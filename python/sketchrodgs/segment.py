@@ -10,6 +10,10 @@ distance are neighbours, so a gap in the cloud separates parts):
   where it joins; a leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the
   rod point where it joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach
   further and stay;
+- continuations: what continues the part past an end and fits within `continuation_size` of it
+  (the tip of a stem with its leaves, past where the stroke stopped); each rides rigidly with that
+  end. A clamped end does not move, so they move only with a free end (`Animation(clamp=...)`);
+  what runs on further (the rest of the plant past a stem's base) stays;
 - strays: small clusters (at most `STRAY_SIZE` R across) within `STRAY_REACH` R of what moves past
   the rod's ends or of its attached parts, across a gap wider than a link but joined to nothing
   else (the halo of floaters around a guitar's headstock). Left behind, they would hang in the air
@@ -44,6 +48,8 @@ from .scene import GaussianScene
 DEFAULT_GROW = 2.5
 ATTACH_SHARE = 0.5  # attached parts up to this share of the rod's length,
 ATTACH_MIN, ATTACH_MAX = 8.0, 20.0  # and between these many R
+CONTINUATION_SHARE = 1.0  # past an end, what fits within the rod's length (8-20 R) continues it
+CONTINUATION_LINKS = 2.0
 END_MARGIN = 3.0  # within this many R of a rod end, only what lies past the end is attached
 # Neighbours: centres within LINK_SPACINGS times the part's typical 4th-neighbour spacing, kept
 # between LINK_MIN and LINK_MAX radii (real captures range from 0.1 to 0.4 R).
@@ -62,6 +68,13 @@ def default_attach_size(length: float, radius: float) -> float:
     on a stem is a third of the stem or more; the body a part joins is longer than the part; the
     cap keeps the search around a long rope small)."""
     return float(np.clip(ATTACH_SHARE * length, ATTACH_MIN * radius, ATTACH_MAX * radius))
+
+
+def default_continuation_size(length: float, radius: float) -> float:
+    """What continues a part past an end rides with it up to the rod's length from the end,
+    between 8 R and 20 R (a stem's tip with its leaves; the rest of a plant past a stem's base
+    reaches further)."""
+    return float(np.clip(CONTINUATION_SHARE * length, ATTACH_MIN * radius, ATTACH_MAX * radius))
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,13 +124,20 @@ def segment_and_bind(
         radius: R.
         grow: the part's cross-section reaches `grow * R` from the axis.
         attach: let small attached parts and strays ride with the rod.
-        attach_size: the largest attached part (default `default_attach_size`).
+        attach_size: the largest attached part (default `default_attach_size`), and when given the
+            largest continuation past an end too (default `default_continuation_size`).
     """
     polyline = np.ascontiguousarray(polyline, np.float64)
+    length = polyline_length(polyline)
+    # a size given bounds what continues the part past its ends too
+    continuation_size = default_continuation_size(length, radius) if attach_size is None else attach_size
     if attach_size is None:
-        attach_size = default_attach_size(polyline_length(polyline), radius)
+        attach_size = default_attach_size(length, radius)
     binding = part_and_attached(polyline, scene, radius, grow=grow, attach_size=attach_size if attach else None)
-    return _with_strays(binding, polyline, scene, radius, attach_size) if attach else binding
+    if not attach:
+        return binding
+    binding = _with_continuations(binding, polyline, scene, radius, continuation_size)
+    return _with_strays(binding, polyline, scene, radius, attach_size)
 
 
 def part_and_attached(
@@ -161,10 +181,7 @@ def _with_strays(
         return binding
     moving = scene.means[binding.gaussian_ids[searched]].astype(np.float64)
     moving_tree = cKDTree(moving, balanced_tree=False, compact_nodes=False)
-    # the part's link, as the segmentation takes it: 1.5 times the typical 4th-neighbour spacing
-    sample = moving[:: max(1, len(moving) // 500)]
-    spacing = float(np.median(moving_tree.query(sample, k=5)[0][:, 4]))
-    link = float(np.clip(LINK_SPACINGS * spacing, LINK_MIN * radius, LINK_MAX * radius))
+    link = _link(moving_tree, radius)
     reach, size = STRAY_REACH * radius, min(STRAY_SIZE * radius, attach_size)
     # unbound Gaussians near what moves, and as far again as a stray cluster may reach (its whole
     # cluster then lies in this region, unless it runs on further: then it is too large anyway)
@@ -220,6 +237,89 @@ def _with_strays(
         np.ones(len(stray_rows), bool),
     )
     return binding.extend(strays)
+
+
+def _link(tree: cKDTree, radius: float) -> float:
+    """The part's link, as the segmentation takes it: 1.5 times the typical 4th-neighbour spacing
+    of the centres in `tree`, within LINK_MIN..LINK_MAX R."""
+    sample = tree.data[:: max(1, tree.n // 500)]
+    spacing = float(np.median(tree.query(sample, k=5)[0][:, 4]))
+    return float(np.clip(LINK_SPACINGS * spacing, LINK_MIN * radius, LINK_MAX * radius))
+
+
+def _with_continuations(
+    binding: Binding, polyline: np.ndarray, scene: GaussianScene, radius: float, size: float
+) -> Binding:
+    """`binding` and what continues the part past each end (see the module docstring), each bound
+    as an attached Gaussian at that end, with its own offset."""
+    arc = arc_lengths(polyline)
+    along = arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
+    if (~binding.attached).sum() < 5:
+        return binding
+    link = CONTINUATION_LINKS * _link(
+        cKDTree(scene.means[binding.gaussian_ids[~binding.attached]].astype(np.float64)), radius
+    )
+    taken = np.sort(binding.gaussian_ids)
+    found: list[Binding] = []
+
+    for end in (0, 1):
+        at_end = ~binding.attached & (
+            (along <= END_MARGIN * radius) if end == 0 else (along >= arc[-1] - END_MARGIN * radius)
+        )
+        if not at_end.any():
+            continue
+        vertex = polyline[0] if end == 0 else polyline[-1]
+        outward = polyline[0] - polyline[1] if end == 0 else polyline[-1] - polyline[-2]
+        outward = outward / max(float(np.linalg.norm(outward)), 1e-30)
+        # the centres not bound yet within reach of the end: the continuation and a link more (one
+        # pass over the scene)
+        region = size + link
+        rows = _core.rows_in_box(scene.means, tuple(vertex - region), tuple(vertex + region))
+        rows = rows[~_sorted_contains(taken, rows)]
+        for other in found:
+            rows = rows[~np.isin(rows, other.gaussian_ids)]
+        from_vertex = np.linalg.norm(scene.means[rows] - vertex, axis=1)
+        close = from_vertex <= region
+        rows, from_vertex = rows[close], from_vertex[close]
+        # seeds: the centres linked to the end's part, which lies within its reach of the vertex
+        end_part = scene.means[binding.gaussian_ids[at_end]]
+        near = np.flatnonzero(from_vertex <= float(np.linalg.norm(end_part - vertex, axis=1).max()) + link)
+        if len(near) == 0:
+            continue
+        touching, _ = cKDTree(end_part).query(scene.means[rows[near]], distance_upper_bound=link * (1 + 1e-6))
+        seeds = near[np.isfinite(touching)].astype(np.int64)
+        if len(seeds) == 0:
+            continue
+        points = np.ascontiguousarray(scene.means[rows], np.float32)
+        goes = _core.continuation(points, seeds, tuple(vertex), tuple(outward), float(size), float(link))
+        if len(goes) == 0:
+            continue
+        count = len(goes)
+        segment = np.full(count, 0 if end == 0 else len(polyline) - 2, np.int32)
+        t = np.full(count, 0.0 if end == 0 else 1.0, np.float32)
+        centre = points[goes].astype(np.float64)
+        _, _, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), region + radius)
+        found.append(
+            Binding(
+                rows[goes].astype(np.int64),
+                segment,
+                t,
+                (centre - point_at(polyline, segment, t)).astype(np.float32),
+                distance.astype(np.float32),
+                np.ones(count, bool),
+            )
+        )
+    for continuation in found:
+        binding = binding.extend(continuation)
+    return binding
+
+
+def _sorted_contains(ordered: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Whether each of `values` is in `ordered` (ascending)."""
+    if len(ordered) == 0:
+        return np.zeros(len(values), bool)
+    at = np.minimum(np.searchsorted(ordered, values), len(ordered) - 1)
+    return ordered[at] == values
 
 
 def which_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:

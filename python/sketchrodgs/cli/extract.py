@@ -36,13 +36,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-attach",
         action="store_true",
-        help="only the part follows the rod, not the small parts attached to it (leaves, a tag)",
+        help="only the part follows the rod, not the small parts attached to it (leaves, a tag) nor "
+        "what continues it past its ends (a stem's tip past the stroke)",
     )
     parser.add_argument(
         "--attach-size",
         type=positive,
         metavar="SIZE",
-        help="largest attached part that follows, in scene units (default: half the rod's length)",
+        help="largest attached part that follows, in scene units (default: half the rod's length; past "
+        "an end, the rod's length)",
     )
     parser.add_argument(
         "-o",

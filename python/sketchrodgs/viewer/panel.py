@@ -148,7 +148,10 @@ class Panel:
                 hint="pixels across the render the stroke is traced on",
             )
             self.attach = gui.add_checkbox(
-                "Attached parts follow", True, hint="small parts joined to the rod (leaves, a tag) ride with it"
+                "Attached parts follow",
+                True,
+                hint="small parts joined to the rod (leaves, a tag), and what continues it past a free end, ride "
+                "with it",
             )
         with gui.add_folder("Export", order=ORDER_EXPORT, expand_by_default=False):
             self.export_ply = gui.add_button("Download deformed .ply", icon=viser.Icon.DOWNLOAD)

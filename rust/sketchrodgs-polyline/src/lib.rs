@@ -20,6 +20,7 @@
 
 use rayon::prelude::*;
 
+pub mod continuation;
 pub mod proximity;
 pub mod segment;
 

@@ -1,8 +1,9 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
-//! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`.
+//! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`, `_core.continuation(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use sketchrodgs_polyline::continuation as past_end;
 use sketchrodgs_polyline::segment::{self, SegmentParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
@@ -142,10 +143,44 @@ fn segment_and_bind<'py>(
     ))
 }
 
+/// The rows of `points` (N, 3) float32 that continue a part past an end
+/// (`sketchrodgs_polyline::continuation`): the components of links `link` apart that hold one of
+/// `seeds` (int64 rows), fit within `size` of the end `vertex` and lie mostly past it (along
+/// `outward`): (K,) int64, ascending.
+#[pyfunction]
+fn continuation<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    seeds: &Bound<'py, PyArray1<i64>>,
+    vertex: [f64; 3],
+    outward: [f64; 3],
+    size: f64,
+    link: f32,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (points, seeds) = (points.try_readonly()?, seeds.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let seeds: Vec<u32> = contiguous(&seeds, "seeds")?
+        .iter()
+        .map(|&s| match u32::try_from(s) {
+            Ok(s) if (s as usize) < points.len() => Ok(s),
+            _ => Err(SketchRodGSError::new_err(format!("seeds: {s} is not one of the {} points", points.len()))),
+        })
+        .collect::<PyResult<_>>()?;
+    if !(size.is_finite() && size >= 0.0) {
+        return Err(SketchRodGSError::new_err(format!("size: must be finite and >= 0, got {size}")));
+    }
+    let rows =
+        run_parallel(py, "continuation", || past_end::continuation(points, &seeds, vertex, outward, size, link))?
+            .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
     m.add_function(wrap_pyfunction!(segment_and_bind, m)?)?;
     m.add_function(wrap_pyfunction!(rows_in_box, m)?)?;
+    m.add_function(wrap_pyfunction!(continuation, m)?)?;
     Ok(())
 }
