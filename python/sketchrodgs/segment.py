@@ -254,28 +254,31 @@ def _with_continuations(
     as an attached Gaussian at that end, with its own offset."""
     arc = arc_lengths(polyline)
     along = arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
-    if (~binding.attached).sum() < 5:
+    # the part's Gaussians within END_MARGIN R of each end: what a continuation touches
+    ends = [
+        ~binding.attached & (along <= END_MARGIN * radius),
+        ~binding.attached & (along >= arc[-1] - END_MARGIN * radius),
+    ]
+    near_ends = ends[0] | ends[1]
+    if near_ends.sum() < 5:
         return binding
-    link = CONTINUATION_LINKS * _link(
-        cKDTree(scene.means[binding.gaussian_ids[~binding.attached]].astype(np.float64)), radius
-    )
-    taken = np.sort(binding.gaussian_ids)
+    # the link from the part's spacing there (the part is sampled alike all along)
+    link = CONTINUATION_LINKS * _link(cKDTree(scene.means[binding.gaussian_ids[near_ends]].astype(np.float64)), radius)
+    # the centres not bound yet within reach of the ends: a continuation and a link more (one pass
+    # over the scene for the box around both)
+    region = size + link
+    vertices = polyline[[0, -1]]
+    around = _core.rows_in_box(scene.means, tuple(vertices.min(axis=0) - region), tuple(vertices.max(axis=0) + region))
+    around = around[~_sorted_contains(np.sort(binding.gaussian_ids), around)]
     found: list[Binding] = []
 
-    for end in (0, 1):
-        at_end = ~binding.attached & (
-            (along <= END_MARGIN * radius) if end == 0 else (along >= arc[-1] - END_MARGIN * radius)
-        )
+    for end, at_end in enumerate(ends):
         if not at_end.any():
             continue
-        vertex = polyline[0] if end == 0 else polyline[-1]
+        vertex = vertices[end]
         outward = polyline[0] - polyline[1] if end == 0 else polyline[-1] - polyline[-2]
         outward = outward / max(float(np.linalg.norm(outward)), 1e-30)
-        # the centres not bound yet within reach of the end: the continuation and a link more (one
-        # pass over the scene)
-        region = size + link
-        rows = _core.rows_in_box(scene.means, tuple(vertex - region), tuple(vertex + region))
-        rows = rows[~_sorted_contains(taken, rows)]
+        rows = around
         for other in found:
             rows = rows[~np.isin(rows, other.gaussian_ids)]
         from_vertex = np.linalg.norm(scene.means[rows] - vertex, axis=1)
