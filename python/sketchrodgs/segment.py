@@ -48,8 +48,8 @@ from .scene import GaussianScene
 DEFAULT_GROW = 2.5
 ATTACH_SHARE = 0.5  # attached parts up to this share of the rod's length,
 ATTACH_MIN, ATTACH_MAX = 8.0, 20.0  # and between these many R
-CONTINUATION_SHARE = 1.0  # past an end, what fits within the rod's length (8-20 R) continues it
-CONTINUATION_LINKS = 2.0
+CONTINUATION_SHARE = 1.0  # past an end, what fits within the rod's length (8-20 R) continues it,
+CONTINUATION_LINKS = 2.0  # linked at twice the part's link: a leaf's big faint Gaussians sit further apart
 END_MARGIN = 3.0  # within this many R of a rod end, only what lies past the end is attached
 # Neighbours: centres within LINK_SPACINGS times the part's typical 4th-neighbour spacing, kept
 # between LINK_MIN and LINK_MAX radii (real captures range from 0.1 to 0.4 R).
@@ -269,7 +269,7 @@ def _with_continuations(
     region = size + link
     vertices = polyline[[0, -1]]
     around = _core.rows_in_box(scene.means, tuple(vertices.min(axis=0) - region), tuple(vertices.max(axis=0) + region))
-    around = around[~_sorted_contains(np.sort(binding.gaussian_ids), around)]
+    around = around[~np.isin(around, binding.gaussian_ids)]
     found: list[Binding] = []
 
     for end, at_end in enumerate(ends):
@@ -315,14 +315,6 @@ def _with_continuations(
     for continuation in found:
         binding = binding.extend(continuation)
     return binding
-
-
-def _sorted_contains(ordered: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Whether each of `values` is in `ordered` (ascending)."""
-    if len(ordered) == 0:
-        return np.zeros(len(values), bool)
-    at = np.minimum(np.searchsorted(ordered, values), len(ordered) - 1)
-    return ordered[at] == values
 
 
 def which_end(segment: np.ndarray, t: np.ndarray, vertices: int) -> np.ndarray:
