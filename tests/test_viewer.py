@@ -336,6 +336,28 @@ def test_material_clamps_and_pins(ring, ring_rod):
         Material(swing_period=0.0)
 
 
+def test_an_end_let_go_in_the_viewer_carries_what_continues_the_stem_past_it():
+    """The bundled plant's stroke stops short of its stem's tip (docs/deformation.md,
+    "Continuations"): held at both ends the tip stays; held at its base only, pulled, it follows."""
+    scene, camera = load_scene(data.sample("plant")), data.sample_camera("plant")
+    extraction = extract_rod(scene, camera, data.sample_stroke("plant"))
+    b = extraction.binding
+    tip = b.gaussian_ids[b.attached & (b.segment == len(extraction.polyline) - 2) & (b.t == 1)]
+    rods = RodSet(scene)
+    entry = rods.add(extraction)
+    for clamp in ("both", "start"):
+        rods.set_clamp(entry.id, clamp)
+        vertex = entry.rod.num_vertices // 2
+        offset = camera.screen_offset(extraction.polyline[vertex], (25, -45))
+        pull(rods, entry.id, offset=tuple(offset), frames=40)
+        moved = np.linalg.norm(rods.means[tip] - scene.means[tip], axis=1)
+        if clamp == "both":
+            assert moved.max() < 1e-6  # float32 rounding of the rest pose
+        else:
+            assert np.median(moved) > 5 * extraction.radius
+        rods.reset()
+
+
 def test_skinning_on_demand_matches_skinning_every_frame(ring, ring_rod):
     eager, lazy = RodSet(ring), RodSet(ring, skin_each_frame=False)
     a, b = eager.add(ring_rod), lazy.add(ring_rod)
