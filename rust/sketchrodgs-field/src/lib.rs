@@ -88,9 +88,7 @@ pub fn max_alpha_of_rows(
     rows: &[usize],
 ) -> Result<Vec<f32>, FieldError> {
     check_lengths(means, scales, quats, opacities)?;
-    if let Some(&row) = rows.iter().find(|&&r| r >= means.len()) {
-        return Err(FieldError::Row { row, count: means.len() });
-    }
+    check_rows(rows, means.len())?;
     splat_rows(grid, means, scales, quats, opacities, rows.par_iter().copied())
 }
 
@@ -108,6 +106,34 @@ fn check_lengths(
     Ok(())
 }
 
+fn check_rows(rows: &[usize], count: usize) -> Result<(), FieldError> {
+    match rows.iter().find(|&&r| r >= count) {
+        Some(&row) => Err(FieldError::Row { row, count }),
+        None => Ok(()),
+    }
+}
+
+/// `len` values, each the largest that `add` (a row's contribution, as a maximum into the values)
+/// gives over `rows`: every thread its own values, merged by maximum, so the result does not
+/// depend on the thread count.
+fn max_over_rows(
+    rows: impl IndexedParallelIterator<Item = usize>,
+    len: usize,
+    add: impl Fn(&mut [f32], usize) + Sync + Send,
+) -> Vec<f32> {
+    let fold = |mut values: Vec<f32>, row: usize| {
+        add(&mut values, row);
+        values
+    };
+    rows.with_min_len(4096).fold(|| vec![0.0f32; len], fold).reduce(
+        || vec![0.0f32; len],
+        |mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x = x.max(y));
+            a
+        },
+    )
+}
+
 /// Every row's Gaussian splatted into the grid, in parallel (each thread its own grid, merged by
 /// maximum).
 fn splat_rows(
@@ -119,17 +145,7 @@ fn splat_rows(
     rows: impl IndexedParallelIterator<Item = usize>,
 ) -> Result<Vec<f32>, FieldError> {
     let cells = grid.cells()?;
-    let splat = |mut alpha: Vec<f32>, g: usize| {
-        splat_one(grid, means[g], scales[g], quats[g], opacities[g], &mut alpha);
-        alpha
-    };
-    Ok(rows.with_min_len(4096).fold(|| vec![0.0f32; cells], splat).reduce(
-        || vec![0.0f32; cells],
-        |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(x, y)| *x = x.max(y));
-            a
-        },
-    ))
+    Ok(max_over_rows(rows, cells, |alpha, g| splat_one(grid, means[g], scales[g], quats[g], opacities[g], alpha)))
 }
 
 /// One Gaussian as the field sees it: `o exp(-q/2)` around its mean, reaching `half` per world
@@ -248,9 +264,7 @@ pub fn max_alpha_along_edges(
 ) -> Result<Vec<f32>, FieldError> {
     check_lengths(means, scales, quats, opacities)?;
     grid.cells()?;
-    if let Some(&row) = rows.iter().find(|&&r| r >= means.len()) {
-        return Err(FieldError::Row { row, count: means.len() });
-    }
+    check_rows(rows, means.len())?;
     if !(1..=MAX_EDGE_SAMPLES).contains(&samples) {
         return Err(FieldError::Samples(samples));
     }
@@ -270,13 +284,13 @@ pub fn max_alpha_along_edges(
     order.sort_unstable_by_key(|&e| (linear(edges[e as usize].node), edges[e as usize].axis));
     let keys: Vec<usize> = order.iter().map(|&e| linear(edges[e as usize].node)).collect();
     let step = grid.spacing / samples as f64;
-    let splat = |mut out: Vec<f32>, g: usize| {
-        let Some(kernel) = Kernel::new(means[g], scales[g], quats[g], opacities[g]) else { return out };
+    let splat = |out: &mut [f32], g: usize| {
+        let Some(kernel) = Kernel::new(means[g], scales[g], quats[g], opacities[g]) else { return };
         // an edge from one node below the box can reach into it
         let (Some((i0, i1)), Some((j0, j1)), Some((k0, k1))) =
             (kernel.nodes(grid, 0, 1.0), kernel.nodes(grid, 1, 1.0), kernel.nodes(grid, 2, 1.0))
         else {
-            return out;
+            return;
         };
         for k in k0..=k1 {
             for j in j0..=j1 {
@@ -301,15 +315,8 @@ pub fn max_alpha_along_edges(
                 }
             }
         }
-        out
     };
-    Ok(rows.par_iter().copied().with_min_len(4096).fold(|| vec![0.0f32; values], splat).reduce(
-        || vec![0.0f32; values],
-        |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(x, y)| *x = x.max(y));
-            a
-        },
-    ))
+    Ok(max_over_rows(rows.par_iter().copied(), values, splat))
 }
 
 /// Row-major rotation matrix of a quaternion `w, x, y, z` (normalised here).

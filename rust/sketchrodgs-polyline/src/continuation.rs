@@ -7,7 +7,7 @@
 //! A component that runs on further (the rest of the plant, the trunk) stays: the search stops
 //! at its first row beyond `size`.
 
-use crate::proximity::{Links, ProximityError};
+use crate::proximity::{Components, ProximityError};
 
 /// The rows of `points` (centres not bound to the rod, near one of its ends) that continue the
 /// part past that end, ascending: the components of the links (`link` apart) that hold a row of
@@ -27,64 +27,20 @@ pub fn continuation(
     let offset = |p: [f32; 3]| [0, 1, 2].map(|k| f64::from(p[k]) - vertex[k]);
     let too_far = |p: [f32; 3]| offset(p).iter().map(|d| d * d).sum::<f64>() > size * size;
     let past = |p: [f32; 3]| offset(p).iter().zip(outward).map(|(d, o)| d * o).sum::<f64>() > 0.0;
-    let mut links = Links::new(points, link)?;
-    let mut state = vec![Search::Unseen; points.len()];
-    let (mut goes, mut component, mut stack, mut linked) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut components = Components::new(points, link)?;
+    let (mut goes, mut component) = (Vec::new(), Vec::new());
     let mut seeds = seeds.to_vec();
     seeds.sort_unstable();
     for &start in &seeds {
-        let start = start as usize;
-        if state[start] != Search::Unseen {
-            continue;
-        }
-        let mut large = false;
-        state[start] = Search::Found;
-        component.clear();
-        stack.push(start);
-        'search: while let Some(i) = stack.pop() {
-            component.push(i);
-            if too_far(points[i]) {
-                large = true;
-                break;
+        if components.search(start as usize, |i| too_far(points[i]), &mut component) == Some(false) {
+            let beyond = component.iter().filter(|&&i| past(points[i])).count();
+            if 2 * beyond >= component.len() {
+                goes.extend(component.iter().map(|&i| i as u32));
             }
-            linked.clear();
-            links.linked_to(i, &mut linked);
-            for &j in &linked {
-                match state[j] {
-                    Search::Unseen => {
-                        state[j] = Search::Found;
-                        stack.push(j);
-                    }
-                    // a component met before: a large one (a small one was searched whole)
-                    Search::Done => {
-                        large = true;
-                        break 'search;
-                    }
-                    Search::Found => {}
-                }
-            }
-        }
-        component.append(&mut stack); // found, not searched from
-        for &i in &component {
-            state[i] = Search::Done;
-        }
-        let beyond = component.iter().filter(|&&i| past(points[i])).count();
-        if !large && 2 * beyond >= component.len() {
-            goes.extend(component.iter().map(|&i| i as u32));
         }
     }
     goes.sort_unstable();
     Ok(goes)
-}
-
-/// Where the search stands with a row.
-#[derive(Clone, Copy, PartialEq)]
-enum Search {
-    Unseen,
-    /// In the component being searched.
-    Found,
-    /// In a component searched before.
-    Done,
 }
 
 #[cfg(test)]

@@ -467,6 +467,81 @@ impl Links {
     }
 }
 
+/// Components of the links, searched depth-first one start at a time, each search stopping at the
+/// first point that shows its component to be large: a later search that meets one of its points
+/// learns that its component is large (a small one was searched whole, so no later search starts
+/// in it or reaches it). A large body is not walked whole. Used for attached parts and
+/// continuations (`crate::segment`, `crate::continuation`).
+pub(crate) struct Components {
+    links: Links,
+    state: Vec<Search>,
+    stack: Vec<usize>,
+    linked: Vec<usize>,
+}
+
+/// Where the search stands with a point.
+#[derive(Clone, Copy, PartialEq)]
+enum Search {
+    Unseen,
+    /// In the component being searched.
+    Found,
+    /// In a component searched before.
+    Done,
+}
+
+impl Components {
+    pub(crate) fn new(points: &[[f32; 3]], link: f32) -> Result<Self, ProximityError> {
+        let links = Links::new(points, link)?;
+        let state = vec![Search::Unseen; points.len()];
+        Ok(Self { links, state, stack: Vec::new(), linked: Vec::new() })
+    }
+
+    /// The component of point `start` into `component` (the points found, cleared first) and
+    /// whether it is large: a point of it is `too_far`, or it meets a component searched before.
+    /// None where a search before took `start`.
+    pub(crate) fn search(
+        &mut self,
+        start: usize,
+        too_far: impl Fn(usize) -> bool,
+        component: &mut Vec<usize>,
+    ) -> Option<bool> {
+        if self.state[start] != Search::Unseen {
+            return None;
+        }
+        let mut large = false;
+        self.state[start] = Search::Found;
+        component.clear();
+        self.stack.push(start);
+        'search: while let Some(i) = self.stack.pop() {
+            component.push(i);
+            if too_far(i) {
+                large = true;
+                break;
+            }
+            self.linked.clear();
+            self.links.linked_to(i, &mut self.linked);
+            for &j in &self.linked {
+                match self.state[j] {
+                    Search::Unseen => {
+                        self.state[j] = Search::Found;
+                        self.stack.push(j);
+                    }
+                    Search::Done => {
+                        large = true; // a large component searched in part before
+                        break 'search;
+                    }
+                    Search::Found => {}
+                }
+            }
+        }
+        component.append(&mut self.stack); // found, not searched from
+        for &i in component.iter() {
+            self.state[i] = Search::Done;
+        }
+        Some(large)
+    }
+}
+
 /// Point kinds for [`grow`].
 pub const SEED: u8 = 0;
 pub const ELIGIBLE: u8 = 1;

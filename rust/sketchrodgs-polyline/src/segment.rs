@@ -280,60 +280,15 @@ fn attached_parts(
         let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
         distance[o] > shell || (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() > size
     };
-    let mut links = proximity::Links::new(&points, part.link)?;
-    let mut state = vec![Search::Unseen; others.len()];
-    let (mut joined, mut component, mut stack, mut linked) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut components = proximity::Components::new(&points, part.link)?;
+    let (mut joined, mut component) = (Vec::new(), Vec::new());
     for (start, contact) in touching {
-        if state[start] != Search::Unseen {
-            continue;
-        }
-        let mut large = false;
-        state[start] = Search::Found;
-        component.clear();
-        stack.push(start);
-        'search: while let Some(o) = stack.pop() {
-            component.push(o);
-            if too_far(o, contact) {
-                large = true;
-                break;
-            }
-            linked.clear();
-            links.linked_to(o, &mut linked);
-            for &j in &linked {
-                match state[j] {
-                    Search::Unseen => {
-                        state[j] = Search::Found;
-                        stack.push(j);
-                    }
-                    Search::Done => {
-                        large = true; // a large component searched in part before
-                        break 'search;
-                    }
-                    Search::Found => {}
-                }
-            }
-        }
-        component.append(&mut stack); // found, not searched from
-        for &o in &component {
-            state[o] = Search::Done;
-        }
-        if !large {
+        if components.search(start, |o| too_far(o, contact), &mut component) == Some(false) {
             joined.extend(component.iter().map(|&o| (others[o], contact)));
         }
     }
     joined.sort_unstable();
     Ok(joined)
-}
-
-/// Where the search for attached parts stands with a row.
-#[derive(Clone, Copy, PartialEq)]
-enum Search {
-    Unseen,
-    /// In the component being searched.
-    Found,
-    /// In a component searched before: a large one (a small one was searched whole, so no later
-    /// search starts in it or reaches it).
-    Done,
 }
 
 /// Drop the attached parts that join within `margin` of a rod end but lie beside the rod rather
