@@ -59,11 +59,13 @@ def test_a_partial_render_grows_by_the_tiles_asked_for():
     missed[0, 0] = missed[-1, -1] = True
     before = partial.tiles.copy()
     partial.add(missed)
-    assert partial.tiles[:2, :2].all() and partial.tiles[-2:, -2:].all() and (partial.tiles >= before).all()
+    assert (partial.tiles == (before | missed)).all() and partial.renders == 2
     full = render(scene, camera, outputs="index")
     inside = pixels_of(partial.tiles, camera)
     np.testing.assert_array_equal(partial.result.index[inside], full.index[inside])
     np.testing.assert_array_equal(partial.result.index_depth[inside], full.index_depth[inside])
+    np.testing.assert_array_equal(partial.result.solid[inside], full.alpha[inside] >= 0.5)
+    assert (partial.result.index[~inside] == -1).all() and not partial.result.solid[~inside].any()
 
 
 def test_bad_tiles_are_refused_by_name():

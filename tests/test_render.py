@@ -322,12 +322,20 @@ def test_index_only_mode_gives_the_same_index_images():
     scene = random_scene(2000, 2, seed=3)
     cam = Camera.look_at((0.0, -1.0, -4.0), (0, 0, 0), width=120, height=90, fov_y_deg=45)
     full = render(scene, cam)
-    for outputs in ("index", ["index"], ("index", "index_depth"), {"index_depth"}, ("index", "alpha")):
+    for outputs in ("index", ("index", "alpha"), {"alpha", "solid"}):
         fast = render(scene, cam, outputs=outputs)
         assert fast.rgb is None and fast.depth is None
         np.testing.assert_array_equal(fast.index, full.index)
         np.testing.assert_array_equal(fast.index_depth, full.index_depth)
         np.testing.assert_array_equal(fast.alpha, full.alpha)  # alpha is free: T is tracked anyway
+        np.testing.assert_array_equal(fast.solid, full.alpha >= 0.5)
+    # without alpha, pixels stop once their index is decided: the same index, depth and solid
+    for outputs in (["index"], ("index", "index_depth"), {"index_depth"}, ("index", "solid")):
+        fast = render(scene, cam, outputs=outputs)
+        assert fast.rgb is None and fast.depth is None and fast.alpha is None
+        np.testing.assert_array_equal(fast.index, full.index)
+        np.testing.assert_array_equal(fast.index_depth, full.index_depth)
+        np.testing.assert_array_equal(fast.solid, full.alpha >= 0.5)
     assert render(scene, cam, outputs=["rgb", "index"]).rgb is not None
     with pytest.raises(SketchRodGSError, match="outputs"):
         render(scene, cam, outputs=["colour"])

@@ -120,7 +120,7 @@ def rasterize(
     cx: float,
     cy: float,
     background: tuple[float, float, float] = ...,
-    index_only: bool = False,
+    mode: str = "all",
     tiles: npt.NDArray[np.bool_] | None = None,
 ) -> Rendered: ...
 
@@ -165,7 +165,7 @@ class RetainedRender:
         cy: float,
         moving: npt.NDArray[np.int64],
         background: tuple[float, float, float] = ...,
-        index_only: bool = False,
+        mode: str = "all",
     ) -> RetainedRender: ...
     def frame(
         self, means: npt.NDArray[np.float32], scales: npt.NDArray[np.float32], quats: npt.NDArray[np.float32]

@@ -468,13 +468,14 @@ def _near_their_pixels(
 def _search_inputs(
     render: RenderResult, stroke: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """The arrays the Rust search takes: index, index depth, opacity (covered pixels where the
-    render has no alpha), and the stroke in the canonical direction with whether it was flipped.
+    """The arrays the Rust search takes: index, index depth, opacity (1 where the render is solid,
+    alpha >= 0.5: all the search asks of alpha), and the stroke in the canonical direction with
+    whether it was flipped.
     The search always starts at the stroke end that comes first in (x, y) order, so the result
     does not depend on the direction the stroke was drawn."""
     index = np.ascontiguousarray(render.index, np.int32)
     depth = np.ascontiguousarray(render.index_depth, np.float32)
-    opacity = np.ascontiguousarray(render.alpha if render.alpha is not None else (index >= 0), np.float32)
+    opacity = np.ascontiguousarray(render.solid, np.float32)
     flip = _flipped(stroke)
     work = np.ascontiguousarray(stroke[::-1] if flip else stroke, np.float32)
     return index, depth, opacity, work, flip

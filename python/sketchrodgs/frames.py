@@ -14,7 +14,7 @@ import numpy as np
 from . import _core
 from .camera import Camera
 from .errors import SketchRodGSError
-from .render import RenderResult, _background, _check_inputs, _core_inputs, _index_only
+from .render import RenderResult, _background, _check_inputs, _core_inputs, render_mode
 from .scene import GaussianScene
 
 
@@ -41,11 +41,12 @@ class FrameRenderer:
         _check_inputs(scene, camera)
         self.size = len(scene)
         self.camera = camera
+        self.mode = render_mode(outputs)
         self._retained = _core.RetainedRender(
             *_core_inputs(scene, camera),
             np.ascontiguousarray(moving, np.int64),
             background=_background(background),
-            index_only=_index_only(outputs),
+            mode=self.mode,
         )
 
     def render(self, scene: GaussianScene) -> RenderResult:
@@ -65,4 +66,4 @@ class FrameRenderer:
             np.ascontiguousarray(scales, np.float32),
             np.ascontiguousarray(quats, np.float32),
         )
-        return RenderResult.from_core(raw)
+        return RenderResult.from_core(raw, self.mode)

@@ -1,8 +1,8 @@
 """Rendering only the band around a stroke (docs/rendering.md, "Rendering part of the image").
 
-The sketch reads K, Z and alpha near the stroke only. `PartialRender` renders the 16x16 tiles
-within reach of the stroke, lets the path search record every read outside them, and renders
-those tiles too when it did; the search then runs again. The final search has read rendered
+The sketch reads K, Z and where alpha reaches 0.5 (`solid`), near the stroke only.
+`PartialRender` renders the 16x16 tiles within reach of the stroke, lets the path search record
+every read outside them, and renders those tiles too when it did; the search then runs again. The final search has read rendered
 pixels only, and rendered tiles equal a full render's exactly, so the rod is the one a full
 render gives, at a fraction of the cost on a large scene.
 """
@@ -12,12 +12,14 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
-from .render import TILE_SIZE, RenderResult, render, tile_grid
+from .render import SOLID_OUTPUTS, TILE_SIZE, RenderResult, render, tile_grid
 from .scene import GaussianScene
 
 # Tiles are taken within the band plus this many pixels of the stroke: the search smooths the
-# stroke (its samples move a few pixels) and measures widths a little past the band.
-MARGIN_PX = 16.0
+# stroke (its samples move a few pixels), and its width walks cross the object past the band.
+# Every later render makes one more pass over the whole scene, which at capture size costs more
+# than these tiles: with 64 px, 28 % of real strokes need no second render (1 % with 16 px).
+MARGIN_PX = 64.0
 
 
 def band_tiles(camera: Camera, stroke: np.ndarray, reach_px: float) -> np.ndarray:
@@ -36,7 +38,8 @@ def band_tiles(camera: Camera, stroke: np.ndarray, reach_px: float) -> np.ndarra
 
 
 class PartialRender:
-    """Index-only render of some tiles of `camera`'s image, grown on demand.
+    """Render of K, Z and solid (`outputs=SOLID_OUTPUTS`) of some tiles of `camera`'s image, grown on
+    demand.
 
     Attributes:
         tiles: (rows, cols) bool, the tiles rendered so far.
@@ -47,7 +50,7 @@ class PartialRender:
     def __init__(self, scene: GaussianScene, camera: Camera, tiles: np.ndarray):
         self.scene, self.camera = scene, camera
         self.tiles = np.ascontiguousarray(tiles, bool)
-        self.result = render(scene, camera, outputs="index", tiles=self.tiles)
+        self.result = render(scene, camera, outputs=SOLID_OUTPUTS, tiles=self.tiles)
         self.renders = 1
 
     def missed(self) -> np.ndarray:
@@ -55,19 +58,15 @@ class PartialRender:
         return np.zeros_like(self.tiles)
 
     def add(self, missed: np.ndarray) -> None:
-        """Render the tiles of `missed` and their neighbours (a walk that left the rendered tiles
-        goes on), and merge them into `result`."""
-        grown = missed.copy()
-        grown[1:] |= missed[:-1]
-        grown[:-1] |= missed[1:]
-        grown[:, 1:] |= grown[:, :-1].copy()
-        grown[:, :-1] |= grown[:, 1:].copy()
-        new = grown & ~self.tiles
+        """Render the tiles of `missed` and merge them into `result`. A width walk that leaves the
+        rendered tiles walks on to its end, so `missed` holds all it can read; only where the
+        search then goes elsewhere (5 % of real strokes) does it ask again."""
+        new = missed & ~self.tiles
         if not new.any():
             return
-        part = render(self.scene, self.camera, outputs="index", tiles=new)
+        part = render(self.scene, self.camera, outputs=SOLID_OUTPUTS, tiles=new)
         pixels = np.kron(new, np.ones((TILE_SIZE, TILE_SIZE), bool))[: self.camera.height, : self.camera.width]
-        merged = {name: getattr(self.result, name).copy() for name in ("index", "index_depth", "alpha")}
+        merged = {name: getattr(self.result, name).copy() for name in ("index", "index_depth", "solid")}
         for name, image in merged.items():
             image[pixels] = getattr(part, name)[pixels]
         self.tiles |= new
@@ -75,9 +74,10 @@ class PartialRender:
         self.result = RenderResult(
             rgb=None,
             depth=None,
-            alpha=merged["alpha"],
+            alpha=None,
             index=merged["index"],
             index_depth=merged["index_depth"],
+            solid=merged["solid"],
             n_visible=self.result.n_visible + part.n_visible,
             n_tile_pairs=self.result.n_tile_pairs + part.n_tile_pairs,
         )

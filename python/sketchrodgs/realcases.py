@@ -24,7 +24,7 @@ from .data import sample
 from .errors import PathNotFoundError
 from .extract import Extraction, extract_rod
 from .io import load_scene
-from .render import render
+from .render import SOLID_OUTPUTS, render
 from .scene import GaussianScene
 
 # The targets, in units of the case's radius R.
@@ -122,7 +122,7 @@ def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10) -> li
     for view in case["views"]:
         camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
         stroke = np.asarray(view["stroke"], np.float64)
-        images = render(scene, camera, outputs="index")
+        images = render(scene, camera, outputs=SOLID_OUTPUTS)
         errors: list[str] = []
 
         def attempt(s: np.ndarray, r: float | None, camera=camera, images=images, errors=errors) -> Extraction | None:

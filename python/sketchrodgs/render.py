@@ -22,8 +22,11 @@ from .camera import Camera
 from .errors import CameraError, SketchRodGSError
 from .scene import GaussianScene
 
-OUTPUT_NAMES = ("rgb", "alpha", "depth", "index", "index_depth")
-INDEX_OUTPUTS = frozenset({"index", "index_depth", "alpha"})
+OUTPUT_NAMES = ("rgb", "alpha", "depth", "index", "index_depth", "solid")
+# Outputs an index-only render gives (no SH, no colour); without "alpha" it may also stop each
+# pixel once its index is decided and its alpha reached 0.5 (docs/rendering.md, "Index and solid only").
+INDEX_OUTPUTS = frozenset({"index", "index_depth", "alpha", "solid"})
+SOLID_OUTPUTS = frozenset({"index", "index_depth", "solid"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,6 +42,7 @@ class RenderResult:
         index: (H, W) int32 row of the Gaussian with the largest alpha_i * T_i (ties go to the
             front-most), -1 where no Gaussian contributes.
         index_depth: (H, W) float32 camera z of that Gaussian (0 where index is -1).
+        solid: (H, W) bool, alpha >= 0.5: the pixel shows something at least half opaque.
         timings: seconds per stage: "project", "sort" (depth sort and tile binning), "composite".
         n_visible: Gaussians that survived culling.
         n_tile_pairs: (tile, Gaussian) pairs binned.
@@ -49,14 +53,17 @@ class RenderResult:
     depth: np.ndarray | None
     index: np.ndarray
     index_depth: np.ndarray
+    solid: np.ndarray
     timings: dict[str, float] = field(default_factory=dict)
     n_visible: int = 0
     n_tile_pairs: int = 0
 
     @classmethod
-    def from_core(cls, raw: _core.Rendered) -> RenderResult:
-        """The result of a core render (`_core.rasterize`, `RetainedRender.frame`)."""
-        return cls(rgb=raw.rgb, alpha=raw.alpha, depth=raw.depth, index=raw.index, index_depth=raw.index_depth,
+    def from_core(cls, raw: _core.Rendered, mode: str) -> RenderResult:
+        """The result of a core render (`_core.rasterize`, `RetainedRender.frame`) in `mode`; in
+        "solid" mode the core's alpha is exact only below 0.5, so only `solid` is kept of it."""
+        return cls(rgb=raw.rgb, alpha=None if mode == "solid" else raw.alpha, depth=raw.depth, index=raw.index,
+                   index_depth=raw.index_depth, solid=raw.alpha >= 0.5,
                    timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
                    n_visible=raw.n_visible, n_tile_pairs=raw.n_tile_pairs)  # fmt: skip
 
@@ -83,12 +90,14 @@ def render(
         camera: a valid pinhole camera (its constructor has checked size, focal lengths and
             rigidity; the renderer checks again).
         background: RGB colour behind the scene, added as T_final * background.
-        outputs: "all"; "index" for only `index`, `index_depth` and `alpha` (cheaper: no SH, no colour);
-            or an iterable of names from OUTPUT_NAMES. Outputs not computed are None.
+        outputs: "all"; "index" for only `index`, `index_depth`, `alpha` and `solid` (cheaper: no SH,
+            no colour); or an iterable of names from OUTPUT_NAMES. Names all among `index`,
+            `index_depth` and `solid` render cheaper still: each pixel stops once its index is
+            decided and its alpha reached 0.5, the rest of alpha is not computed (`alpha` None).
+            Outputs not computed are None.
         tiles: (ceil(H / 16), ceil(W / 16)) bool, the tiles to render (`tile_grid`); each comes out
             exactly as in a full render, the others as background with index -1. Gaussians that
             cannot reach them are skipped before projection, so a narrow band renders quickly.
-
     Returns:
         A RenderResult. An empty scene, or one entirely behind the camera, renders as the
         background with index -1 everywhere.
@@ -99,14 +108,14 @@ def render(
     """
     _check_inputs(scene, camera)
     bg = _background(background)
-    index_only = _index_only(outputs)
+    mode = render_mode(outputs)
     if tiles is not None:
         tiles = np.asarray(tiles)
         if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
             raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
         tiles = np.ascontiguousarray(tiles != 0)
-    raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, index_only=index_only, tiles=tiles)
-    return RenderResult.from_core(raw)
+    raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles)
+    return RenderResult.from_core(raw, mode)
 
 
 def _check_inputs(scene: GaussianScene, camera: Camera) -> None:
@@ -146,15 +155,16 @@ def _background(background: Iterable[float]) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-def _index_only(outputs: str | Iterable[str]) -> bool:
-    if outputs == "all":
-        return False
-    if outputs == "index":
-        return True
+def render_mode(outputs: str | Iterable[str]) -> str:
+    """The core's render mode for `outputs`: "all", "index" or "solid"."""
+    if outputs in ("all", "index"):
+        return outputs  # type: ignore[return-value]
     names = {outputs} if isinstance(outputs, str) else set(outputs)
     unknown = names - set(OUTPUT_NAMES)
     if unknown or not names:
         raise SketchRodGSError(
             f"outputs: expected 'all', 'index' or names from {', '.join(OUTPUT_NAMES)}, got {outputs!r}"
         )
-    return names <= INDEX_OUTPUTS
+    if names <= SOLID_OUTPUTS:
+        return "solid"
+    return "index" if names <= INDEX_OUTPUTS else "all"

@@ -100,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
         camera = select_camera(cameras, args.view, camera_file(args) or "")
         stroke = load_stroke(args.stroke)
         scene = load_scene(args.scene)
-        images = render(scene, camera, outputs="all" if args.overlay else "index")
+        # the overlay needs the whole colour image; without one the sketch renders only its band
+        images = render(scene, camera) if args.overlay else None
         try:
             extraction = extract_rod(
                 scene,
@@ -114,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
                 render=images,
             )
         except PathNotFoundError as err:
-            if overlay_path is not None:  # show what was found and where it stopped, so the user sees what to change
+            if overlay_path is not None and images is not None:  # show the user what was found, where it stopped
                 overlay = draw_overlay(
                     images.rgb_image, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", [])
                 )
@@ -123,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
                 raise PathNotFoundError(f"{err} (overlay of the stroke and the path so far: {args.overlay})") from None
             raise
         extraction.save(rod_path)
-        if overlay_path is not None:
+        if overlay_path is not None and images is not None:
             overlay = draw_overlay(
                 images.rgb_image,
                 camera,

@@ -20,11 +20,12 @@ fn raster_err(err: RasterError) -> PyErr {
 ///
 /// Arrays are float32 and C-contiguous: means (N, 3), scales (N, 3), quats (N, 4) wxyz,
 /// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a `Rendered`: rgb
-/// (H, W, 3), alpha, depth, index (int32) and index_depth, each (H, W) (rgb and depth None when
-/// `index_only`), the stage timings in seconds and the visible and pair counts.
+/// (H, W, 3), alpha, depth, index (int32) and index_depth, each (H, W), the stage timings in
+/// seconds and the visible and pair counts. `mode` is "all"; "index" (rgb and depth None); or
+/// "solid" (as "index", with alpha exact only below 0.5: `RenderMode::IndexSolid`).
 /// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), index_only = false, tiles = None))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -41,13 +42,13 @@ fn rasterize<'py>(
     cx: f64,
     cy: f64,
     background: (f32, f32, f32),
-    index_only: bool,
+    mode: &str,
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
 ) -> PyResult<Rendered> {
     let scene = SceneInput::new(means, scales, quats, opacities, sh)?;
     let splats = scene.splats()?;
     let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
-    let options = options_of(background, index_only);
+    let options = options_of(background, mode)?;
 
     let mask = match tiles {
         None => None,
@@ -126,11 +127,16 @@ fn camera_from(
     Ok(Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix })
 }
 
-fn options_of(background: (f32, f32, f32), index_only: bool) -> RenderOptions {
-    RenderOptions {
-        background: [background.0, background.1, background.2],
-        mode: if index_only { RenderMode::IndexOnly } else { RenderMode::Full },
-    }
+fn options_of(background: (f32, f32, f32), mode: &str) -> PyResult<RenderOptions> {
+    let mode = match mode {
+        "all" => RenderMode::Full,
+        "index" => RenderMode::IndexOnly,
+        "solid" => RenderMode::IndexSolid,
+        other => {
+            return Err(SketchRodGSError::new_err(format!("mode: expected 'all', 'index' or 'solid', got {other:?}")));
+        }
+    };
+    Ok(RenderOptions { background: [background.0, background.1, background.2], mode })
 }
 
 /// A render kept between the frames of an animation (see `sketchrodgs.frames`): built from the
@@ -145,7 +151,7 @@ pub struct RetainedRender {
 #[pymethods]
 impl RetainedRender {
     #[new]
-    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), index_only = false))]
+    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -163,7 +169,7 @@ impl RetainedRender {
         cy: f64,
         moving: &Bound<'_, PyArray1<i64>>,
         background: (f32, f32, f32),
-        index_only: bool,
+        mode: &str,
     ) -> PyResult<Self> {
         let scene = SceneInput::new(means, scales, quats, opacities, sh)?;
         let splats = scene.splats()?;
@@ -175,7 +181,7 @@ impl RetainedRender {
             .collect::<Option<Vec<u32>>>()
             .ok_or_else(|| SketchRodGSError::new_err(format!("moving: rows must be in 0..{n}")))?;
         let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
-        let options = options_of(background, index_only);
+        let options = options_of(background, mode)?;
         let retained = run_parallel(py, "RetainedRender", || Retained::new(&splats, &camera, &options, &rows))?
             .map_err(raster_err)?;
         Ok(Self { retained })

@@ -125,7 +125,6 @@ pub(crate) fn composite_with<S: Source>(
     mask: Option<&TileMask>,
 ) {
     let (width, height) = (camera.width as usize, camera.height as usize);
-    let with_color = options.mode == RenderMode::Full;
     let grid_x = camera.tile_grid().0 as usize;
     let n_bands = height.div_ceil(TILE);
     let band_rows = TILE * width;
@@ -145,11 +144,12 @@ pub(crate) fn composite_with<S: Source>(
     }
     let render = |band: Band| {
         let job = BandJob { width, height, grid_x, source, background: options.background, mask };
-        match (simd, with_color) {
-            (Simd::Four, true) => render_band::<true, F32x4, S>(band, &job),
-            (Simd::Four, false) => render_band::<false, F32x4, S>(band, &job),
+        match (simd, options.mode) {
+            (Simd::Four, RenderMode::Full) => render_band::<true, false, F32x4, S>(band, &job),
+            (Simd::Four, RenderMode::IndexOnly) => render_band::<false, false, F32x4, S>(band, &job),
+            (Simd::Four, RenderMode::IndexSolid) => render_band::<false, true, F32x4, S>(band, &job),
             #[cfg(target_arch = "x86_64")]
-            (Simd::Eight, colour) => render_band_eight(band, &job, colour),
+            (Simd::Eight, mode) => render_band_eight(band, &job, mode),
         }
     };
     bands.into_par_iter().with_max_len(1).for_each(render);
@@ -167,13 +167,19 @@ struct BandJob<'a, S> {
 
 /// [`render_band`] with eight lanes, compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
-fn render_band_eight<S: Source>(band: Band, job: &BandJob<S>, colour: bool) {
+fn render_band_eight<S: Source>(band: Band, job: &BandJob<S>, mode: RenderMode) {
     #[target_feature(enable = "avx2")]
-    fn run<const COLOR: bool, S: Source>(band: Band, job: &BandJob<S>) {
-        render_band::<COLOR, crate::simd::F32x8, S>(band, job);
+    fn run<const COLOR: bool, const SOLID: bool, S: Source>(band: Band, job: &BandJob<S>) {
+        render_band::<COLOR, SOLID, crate::simd::F32x8, S>(band, job);
     }
     // SAFETY: `Simd::Eight` comes only from `Simd::detect`, which checked that the CPU has AVX2.
-    unsafe { if colour { run::<true, S>(band, job) } else { run::<false, S>(band, job) } }
+    unsafe {
+        match mode {
+            RenderMode::Full => run::<true, false, S>(band, job),
+            RenderMode::IndexOnly => run::<false, false, S>(band, job),
+            RenderMode::IndexSolid => run::<false, true, S>(band, job),
+        }
+    }
 }
 
 /// `n` consecutive chunks of `len` (the last shorter), or `n` empty slices for an unused output.
@@ -230,7 +236,7 @@ impl TileState {
 
 /// Blends every tile of `band` (those of the job's mask only, when it has one).
 #[inline(always)] // into `render_band_eight` too, so that the lanes compile for AVX2 there
-fn render_band<const COLOR: bool, V: Lanes, S: Source>(band: Band, job: &BandJob<S>) {
+fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: Band, job: &BandJob<S>) {
     let &BandJob { width, height, grid_x, source, background, mask } = job;
     let row0 = band.row0;
     let rows = TILE.min(height - row0);
@@ -253,7 +259,7 @@ fn render_band<const COLOR: bool, V: Lanes, S: Source>(band: Band, job: &BandJob
                     *dst = source.splat(id);
                 }
                 for (g, &id) in fetched.iter().zip(batch) {
-                    live = live.saturating_sub(blend::<COLOR, V>(&mut state, g, id, col0, row0));
+                    live = live.saturating_sub(blend::<COLOR, SOLID, V>(&mut state, g, id, col0, row0));
                     if live == 0 {
                         break 'lists;
                     }
@@ -295,8 +301,19 @@ fn render_band<const COLOR: bool, V: Lanes, S: Source>(band: Band, job: &BandJob
 /// `power > 0`, `alpha = min(0.99, o exp(power))`, skip `alpha < 1/255`, stop (without blending)
 /// when `T (1 - alpha) < 1e-4`, else `C += c alpha T`, `T *= 1 - alpha`. Every lane does the
 /// same IEEE operations whatever the width, so four and eight lanes give the same bits.
+///
+/// With `SOLID` ([`RenderMode::IndexSolid`]) a pixel also stops once its index is decided and
+/// its alpha reached 0.5. Decided: every later weight is `alpha * T'` with `alpha <= ALPHA_MAX`
+/// and `T' <= T`, so (rounding being monotone) at most `ALPHA_MAX * T`; where that is at most the
+/// largest weight so far, no later Gaussian is strictly heavier and the index cannot change.
 #[inline(always)]
-fn blend<const COLOR: bool, V: Lanes>(state: &mut TileState, g: &Splat2D, id: u32, col0: usize, row0: usize) -> usize {
+fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
+    state: &mut TileState,
+    g: &Splat2D,
+    id: u32,
+    col0: usize,
+    row0: usize,
+) -> usize {
     let [bx0, by0, bx1, by1] = g.pixel_box.map(usize::from);
     let x_start = bx0.max(col0) - col0;
     let x_end = (bx1 + 1).min(col0 + TILE).saturating_sub(col0);
@@ -341,16 +358,22 @@ fn blend<const COLOR: bool, V: Lanes>(state: &mut TileState, g: &Splat2D, id: u3
             let stop = valid.and(test_t.lt(s(T_MIN)));
             let blended = valid.and_not(stop);
             let weight = blended.keep(alpha * t);
-            blended.select(test_t, t).store(&mut state.transmittance[y], gi);
-            let stop_bits = stop.bits();
+            let new_t = blended.select(test_t, t);
+            new_t.store(&mut state.transmittance[y], gi);
+            let max_weight = V::load(&state.max_weight[y], gi);
+            let better = weight.gt(max_weight);
+            let new_max = better.select(weight, max_weight);
+            new_max.store(&mut state.max_weight[y], gi);
+            better.select(id_lanes, V::load_bits(&state.max_id[y], gi)).store_bits(&mut state.max_id[y], gi);
+            let mut stop_bits = stop.bits();
+            if SOLID {
+                let decided = lanes.and((s(ALPHA_MAX) * new_t).le(new_max)).and((s(1.0) - new_t).ge(s(0.5)));
+                stop_bits |= decided.bits();
+            }
             if stop_bits != 0 {
                 state.live[y] &= !((stop_bits << (gi * V::N)) as u16);
                 stopped += stop_bits.count_ones() as usize;
             }
-            let max_weight = V::load(&state.max_weight[y], gi);
-            let better = weight.gt(max_weight);
-            better.select(weight, max_weight).store(&mut state.max_weight[y], gi);
-            better.select(id_lanes, V::load_bits(&state.max_id[y], gi)).store_bits(&mut state.max_id[y], gi);
             if COLOR {
                 let add = |acc: &mut Row, value: V| (V::load(acc, gi) + value * weight).store(acc, gi);
                 add(&mut state.red[y], red);

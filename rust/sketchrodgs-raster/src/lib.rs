@@ -191,6 +191,12 @@ pub enum RenderMode {
     Full,
     /// Only the index image and its depth (no SH evaluation, no colour or depth accumulation).
     IndexOnly,
+    /// The index image and its depth, exactly as [`RenderMode::IndexOnly`] gives them, and of
+    /// alpha only whether it reaches 0.5: a pixel stops blending once no later Gaussian can take
+    /// its index (`ALPHA_MAX * T` is at most its largest weight) and its alpha has reached 0.5.
+    /// `alpha` is then exact below 0.5 and at least 0.5 where the full alpha is. What a sketch
+    /// reads (docs/rendering.md, "Index and solid only"); over opaque objects far cheaper.
+    IndexSolid,
 }
 
 /// Render settings.
@@ -213,15 +219,15 @@ pub struct StageTimings {
     pub composite_s: f64,
 }
 
-/// A rendered image set. Images are row-major `[row][col]`; `rgb` and `depth` are empty in
-/// [`RenderMode::IndexOnly`].
+/// A rendered image set. Images are row-major `[row][col]`; `rgb` and `depth` are empty in the
+/// index modes.
 #[derive(Clone, Debug, Default)]
 pub struct RenderOutput {
     pub width: usize,
     pub height: usize,
     /// (H * W * 3) colour, not clamped (SH colours may exceed 1).
     pub rgb: Vec<f32>,
-    /// (H * W) accumulated opacity `1 - T_final`.
+    /// (H * W) accumulated opacity `1 - T_final` ([`RenderMode::IndexSolid`]: exact below 0.5).
     pub alpha: Vec<f32>,
     /// (H * W) expected camera z, `sum(w_i z_i) / alpha` (0 where nothing contributes).
     pub depth: Vec<f32>,

@@ -97,7 +97,7 @@ fn four_and_eight_lanes_blend_the_same_bits() {
     let mut scene = Scene::random(20_000, 16, 5);
     scene.scales.iter_mut().step_by(37).for_each(|s| *s *= 15.0);
     let cam = camera(203, 117);
-    for mode in [RenderMode::Full, RenderMode::IndexOnly] {
+    for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid] {
         let options = RenderOptions { background: [0.2, 0.1, 0.4], mode };
         let projected = project(&scene.splats(), &cam, mode == RenderMode::Full, None);
         let order = sort_by_depth(&projected.splats, &projected.rects);
@@ -132,6 +132,41 @@ fn index_only_mode_skips_colour_but_keeps_the_index_and_alpha() {
     assert_eq!(fast.index, full.index);
     assert_eq!(fast.alpha, full.alpha);
     assert_eq!(fast.index_depth, full.index_depth);
+}
+
+#[test]
+fn index_solid_mode_keeps_the_index_and_whether_alpha_reaches_half() {
+    let mut scene = Scene::random(20_000, 4, 7);
+    scene.opacities.iter_mut().step_by(2).for_each(|o| *o = 0.95); // opaque patches, where pixels stop early
+    let cam = camera(203, 117);
+    let exact =
+        rasterize(&scene.splats(), &cam, &RenderOptions { mode: RenderMode::IndexOnly, ..RenderOptions::default() })
+            .unwrap();
+    let runs: Vec<RenderOutput> = [1, 2, 3]
+        .iter()
+        .map(|&threads| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let options = RenderOptions { mode: RenderMode::IndexSolid, ..RenderOptions::default() };
+            pool.install(|| rasterize(&scene.splats(), &cam, &options).unwrap())
+        })
+        .collect();
+    for solid in &runs {
+        assert!(solid.rgb.is_empty() && solid.depth.is_empty());
+        assert_eq!(solid.index, exact.index);
+        assert_eq!(solid.index_depth, exact.index_depth);
+        assert_eq!(solid.alpha, runs[0].alpha);
+        for (&a, &full) in solid.alpha.iter().zip(&exact.alpha) {
+            assert_eq!(a >= 0.5, full >= 0.5);
+            assert!(a <= full);
+            if full < 0.5 {
+                assert_eq!(a, full);
+            }
+        }
+    }
+    // the early stop did happen, on most of the covered pixels
+    let covered = exact.alpha.iter().filter(|&&a| a >= 0.5).count();
+    let stopped = runs[0].alpha.iter().zip(&exact.alpha).filter(|(a, full)| a < full).count();
+    assert!(covered > 10_000 && stopped > covered / 2, "{stopped} of {covered}");
 }
 
 #[test]
