@@ -122,6 +122,8 @@ def test_extraction_on_a_band_render_finds_the_full_render_rod(case_name):
 def test_extract_rod_renders_a_small_part_of_the_image():
     scene, camera, stroke = plant()
     rod = extract_rod(scene, camera, stroke)
-    assert rod.timings["rendered_tiles"] < 0.5
+    assert rod.rendered_tiles is not None and rod.rendered_tiles < 0.5
+    assert all(name in rod.timings for name in ("render", "path_search", "polyline", "segment_bind"))
     reference = extract_rod(scene, camera, stroke, render=render(scene, camera, outputs="index"))
+    assert reference.rendered_tiles is None and "render" not in reference.timings
     np.testing.assert_array_equal(rod.gaussian_ids, reference.gaussian_ids)

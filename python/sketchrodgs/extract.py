@@ -54,6 +54,8 @@ class Extraction:
         camera: the camera the stroke was drawn in.
         stroke: (S, 2) float32 stroke in pixel coordinates.
         timings: seconds per stage.
+        rendered_tiles: the share of the image's 16x16 tiles the sketch rendered (None where the
+            render was given).
         scene_identity: the scene the rod was extracted from (None for rod files written before
             it was recorded); `Animation` refuses another scene.
     """
@@ -71,6 +73,7 @@ class Extraction:
     stroke: np.ndarray
     radius_estimated: bool = False
     timings: dict[str, float] = field(default_factory=dict)
+    rendered_tiles: float | None = None
     scene_identity: SceneIdentity | None = None
 
     def to_json(self, material: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -330,8 +333,6 @@ def extract_rod(
         render = partial.result
         timings["render"] += time.perf_counter() - clock
     radius = radius_found
-    if partial is not None:
-        timings["rendered_tiles"] = float(partial.tiles.mean())
     flip = _flipped(stroke)
     pieces = trace.pieces
 
@@ -379,6 +380,7 @@ def extract_rod(
         stroke=stroke,
         radius_estimated=estimated,
         timings=timings,
+        rendered_tiles=float(partial.tiles.mean()) if partial is not None else None,
         scene_identity=SceneIdentity.of(scene),
     )
 
