@@ -261,7 +261,7 @@ mod tests {
             cy: 50.0,
             world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
         };
-        for mode in [RenderMode::Full, RenderMode::IndexOnly] {
+        for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid] {
             let options = RenderOptions { background: [0.3, 0.2, 0.1], mode };
             let splats = |means: &[Vec3], quats: &[[f32; 4]]| {
                 rasterize(
