@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from . import _core
 from .atomic import atomic_open
 from .camera import Camera
+from .errors import SketchRodGSError
 
 STROKE_COLOUR = (40, 220, 90)
 PATH_COLOUR = (255, 60, 40)
@@ -23,19 +25,28 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
     return (np.clip(np.nan_to_num(rgb), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
-# Animation frames are written fast: zlib level 1 takes three quarters of level 6's time (25 against
-# 33 ms at 960x540), for files 1.2x as large.
+# Animation frames are written at the fast level: `fdeflate` (Rust `png` crate) writes a 960x540
+# frame in 3 ms, where Pillow's zlib took 15 ms at level 1 and 32 ms at level 6, for files of the
+# same size (benches/bench_io.py).
 FRAME_PNG_LEVEL = 1
 
 
 def save_png(path: str | os.PathLike[str], image: np.ndarray | Image.Image, compress_level: int = 6) -> None:
-    """Write an (H, W, 3) image (uint8, or float in [0, 1]) or a PIL image as PNG, atomically
-    (`compress_level` 0-9, zlib's: 1 is fastest)."""
-    if not isinstance(image, Image.Image):
+    """Write an (H, W, 3) image (uint8, or float in [0, 1]) or a PIL image as an RGB PNG, atomically
+    (`compress_level` 0-9 as zlib's: 0 stores, 1 is fast, 9 smallest; encoded in Rust)."""
+    if isinstance(compress_level, bool) or not isinstance(compress_level, (int, np.integer)):
+        raise SketchRodGSError(f"compress_level: expected an integer 0 to 9, got {compress_level!r}")
+    if not 0 <= compress_level <= 9:
+        raise SketchRodGSError(f"compress_level: expected an integer 0 to 9, got {compress_level}")
+    if isinstance(image, Image.Image):
+        pixels = np.asarray(image.convert("RGB"))
+    else:
         pixels = image if image.dtype == np.uint8 else to_uint8(image)
-        image = Image.fromarray(np.ascontiguousarray(pixels), "RGB")
+    if pixels.ndim != 3 or pixels.shape[2] != 3:
+        raise SketchRodGSError(f"image: expected shape (H, W, 3), got {pixels.shape}")
+    encoded = _core.encode_png(np.ascontiguousarray(pixels), int(compress_level))
     with atomic_open(path) as stream:
-        image.save(stream, format="PNG", compress_level=compress_level)
+        stream.write(encoded)
 
 
 JPEG_QUALITY = 95

@@ -9,6 +9,7 @@ mod arrays;
 mod errors;
 mod field;
 mod formats;
+mod image;
 mod path;
 mod polyline;
 mod pool;
@@ -22,6 +23,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     field::register(m)?;
     formats::register(m)?;
+    image::register(m)?;
     path::register(m)?;
     polyline::register(m)?;
     pool::register(m)?;
