@@ -2,9 +2,9 @@
 
 The sketch reads K, Z and where alpha reaches 0.5 (`solid`), near the stroke only.
 `PartialRender` renders the 16x16 tiles within reach of the stroke, lets the path search record
-every read outside them, and renders those tiles too when it did; the search then runs again. The final search has read rendered
-pixels only, and rendered tiles equal a full render's exactly, so the rod is the one a full
-render gives, at a fraction of the cost on a large scene.
+every read outside them, and renders those tiles too when it did; the search then runs again.
+The final search has read rendered pixels only, and rendered tiles equal a full render's
+exactly, so the rod is the one a full render gives, at a fraction of the cost on a large scene.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ class PartialRender:
     def add(self, missed: np.ndarray) -> None:
         """Render the tiles of `missed` and merge them into `result`. A width walk that leaves the
         rendered tiles walks on to its end, so `missed` holds all it can read; only where the
-        search then goes elsewhere (5 % of real strokes) does it ask again."""
+        search then goes elsewhere (1 of 117 real strokes) does it ask again."""
         new = missed & ~self.tiles
         if not new.any():
             return
