@@ -17,7 +17,7 @@ from sketchrodgs.errors import PathNotFoundError, SketchRodGSError
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.partial_render import PartialRender, band_tiles
 from sketchrodgs.realcases import load_cases
-from sketchrodgs.render import TILE_SIZE, render, tile_grid
+from sketchrodgs.render import TILE_SIZE, RenderResult, render, tile_grid
 
 CASES_FILE = Path(__file__).parent / "data" / "real_cases" / "cases.json"
 
@@ -126,4 +126,16 @@ def test_extract_rod_renders_a_small_part_of_the_image():
     assert all(name in rod.timings for name in ("render", "path_search", "polyline", "segment_bind"))
     reference = extract_rod(scene, camera, stroke, render=render(scene, camera, outputs="index"))
     assert reference.rendered_tiles is None and "render" not in reference.timings
+    np.testing.assert_array_equal(rod.gaussian_ids, reference.gaussian_ids)
+
+
+def test_a_render_made_by_hand_without_solid_gives_the_same_rod():
+    scene, camera, stroke = plant()
+    full = render(scene, camera, outputs="index")
+    by_hand = RenderResult(rgb=None, alpha=full.alpha, depth=None, index=full.index, index_depth=full.index_depth)
+    assert by_hand.solid is None
+    np.testing.assert_array_equal(by_hand.is_solid(), full.solid)
+    rod = extract_rod(scene, camera, stroke, render=by_hand)
+    reference = extract_rod(scene, camera, stroke, render=full)
+    np.testing.assert_array_equal(rod.polyline, reference.polyline)
     np.testing.assert_array_equal(rod.gaussian_ids, reference.gaussian_ids)

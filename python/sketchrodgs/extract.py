@@ -477,7 +477,7 @@ def _search_inputs(
     does not depend on the direction the stroke was drawn."""
     index = np.ascontiguousarray(render.index, np.int32)
     depth = np.ascontiguousarray(render.index_depth, np.float32)
-    opacity = np.ascontiguousarray(render.solid, np.float32)
+    opacity = np.ascontiguousarray(render.is_solid(), np.float32)
     flip = _flipped(stroke)
     work = np.ascontiguousarray(stroke[::-1] if flip else stroke, np.float32)
     return index, depth, opacity, work, flip

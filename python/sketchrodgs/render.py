@@ -42,7 +42,8 @@ class RenderResult:
         index: (H, W) int32 row of the Gaussian with the largest alpha_i * T_i (ties go to the
             front-most), -1 where no Gaussian contributes.
         index_depth: (H, W) float32 camera z of that Gaussian (0 where index is -1).
-        solid: (H, W) bool, alpha >= 0.5: the pixel shows something at least half opaque.
+        solid: (H, W) bool, alpha >= 0.5: the pixel shows something at least half opaque (None in
+            a result made by hand without it: `is_solid` then reads alpha).
         timings: seconds per stage: "project", "sort" (depth sort and tile binning), "composite".
         n_visible: Gaussians that survived culling.
         n_tile_pairs: (tile, Gaussian) pairs binned.
@@ -53,7 +54,7 @@ class RenderResult:
     depth: np.ndarray | None
     index: np.ndarray
     index_depth: np.ndarray
-    solid: np.ndarray
+    solid: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)
     n_visible: int = 0
     n_tile_pairs: int = 0
@@ -66,6 +67,13 @@ class RenderResult:
                    index_depth=raw.index_depth, solid=raw.alpha >= 0.5,
                    timings={"project": raw.project_s, "sort": raw.sort_s, "composite": raw.composite_s},
                    n_visible=raw.n_visible, n_tile_pairs=raw.n_tile_pairs)  # fmt: skip
+
+    def is_solid(self) -> np.ndarray:
+        """(H, W) bool `solid`; for a result without it, alpha >= 0.5, or where no alpha either,
+        every pixel a Gaussian covers."""
+        if self.solid is not None:
+            return self.solid
+        return self.alpha >= 0.5 if self.alpha is not None else self.index >= 0
 
     @property
     def rgb_image(self) -> np.ndarray:
