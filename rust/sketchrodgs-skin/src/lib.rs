@@ -217,8 +217,11 @@ fn skin_into(
         .zip(quats.par_chunks_mut(CHUNK))
         .zip(scales.par_chunks_mut(CHUNK))
         .enumerate()
-        .for_each(|(chunk, ((means, quats), scales))| {
+        // per thread, the rows of a chunk whose stretched covariance is re-diagonalised (LANES at
+        // a time, below)
+        .for_each_init(Vec::new, |exact: &mut Vec<Stretch>, (chunk, ((means, quats), scales))| {
             let start = chunk * CHUNK;
+            exact.clear();
             for (k, ((mean, rotated), scaled)) in
                 means.iter_mut().zip(quats.iter_mut()).zip(scales.iter_mut()).enumerate()
             {
@@ -245,9 +248,22 @@ fn skin_into(
                     *rotated = wxyz((rotation * own).normalize());
                     *scaled = stretched_axes(own, binding.scale[g], segments[i].direction, stretch);
                 } else {
-                    let (turn, new_scale) = stretched(own, binding.scale[g], segments[i].direction, stretch);
-                    *rotated = wxyz((rotation * own * turn).normalize());
-                    *scaled = new_scale;
+                    *rotated = wxyz(rotation * own); // turned further below
+                    exact.push(Stretch {
+                        row: k,
+                        own,
+                        scale: binding.scale[g],
+                        direction: segments[i].direction,
+                        stretch,
+                    });
+                }
+            }
+            for group in exact.chunks(LANES) {
+                // a short last group repeats its last row in the spare lanes
+                let lanes: [&Stretch; LANES] = std::array::from_fn(|l| &group[l.min(group.len() - 1)]);
+                for (stretch, (turn, new_scale)) in group.iter().zip(stretched(lanes)) {
+                    quats[stretch.row] = wxyz((quat(quats[stretch.row]) * turn).normalize());
+                    scales[stretch.row] = new_scale;
                 }
             }
         });
@@ -265,59 +281,124 @@ fn stretched_axes(own: Quat, scale: [f32; 3], direction: Vec3, stretch: f32) -> 
     ]
 }
 
-/// A Gaussian (rotation `own`, scales `scale`) stretched by `stretch` along the world direction
-/// `direction`: the rotation to apply after `own` and the new scales. In the Gaussian's own axes
-/// the stretched covariance is `M Mᵀ` with `M = (I + ε d dᵀ) S`, nearly diagonal for a modest
-/// stretch, so two Jacobi sweeps diagonalise it (to 3e-4 of the covariance, measured in its own
-/// metric, for stretches up to 30 %, thin Gaussians included). In f64: squaring the scales of a thin
-/// Gaussian (1e-3 of its length) would lose its thickness in f32.
-fn stretched(own: Quat, scale: [f32; 3], direction: Vec3, stretch: f32) -> (Quat, [f32; 3]) {
-    let d = (own.inverse() * direction).as_dvec3();
-    let s = Vec3::from(scale).as_dvec3();
-    let e = f64::from(stretch) - 1.0;
-    let m = DMat3::from_diagonal(s) + e * DMat3::from_cols(d * (d.x * s.x), d * (d.y * s.y), d * (d.z * s.z));
-    let (vectors, values) = jacobi_eigen(m * m.transpose());
-    let turn = DQuat::from_mat3(&vectors).normalize().as_quat();
+/// One Gaussian to stretch exactly: its row in the chunk, its rotation and scales at rest, and the
+/// stretch of its segment along the segment's rest direction.
+struct Stretch {
+    row: usize,
+    own: Quat,
+    scale: [f32; 3],
+    direction: Vec3,
+    stretch: f32,
+}
+
+/// Gaussians re-diagonalised together. One alone is a chain of dependent square roots and
+/// divisions, each waiting for the last; independent lanes overlap them and vectorise
+/// (docs/deformation.md, "Speed": 108 ns a Gaussian one at a time, 75 ns eight at a time).
+const LANES: usize = 8;
+type Lanes = [f64; LANES];
+
+/// Per lane, a Gaussian (rotation `own`, scales `scale`) stretched by `stretch` along the world
+/// direction `direction`: the rotation to apply after `own` and the new scales. In the Gaussian's
+/// own axes the stretched covariance is `M Mᵀ` with `M = (I + ε d dᵀ) S`, nearly diagonal for a
+/// modest stretch, so two Jacobi sweeps diagonalise it (to 3e-4 of the covariance, measured in its
+/// own metric, for stretches up to 30 %, thin Gaussians included). In f64: squaring the scales of a
+/// thin Gaussian (1e-3 of its length) would lose its thickness in f32.
+fn stretched(lanes: [&Stretch; LANES]) -> [(Quat, [f32; 3]); LANES] {
+    // in the Gaussian's own axes, per lane: the direction d, the scales s and ε
+    let mut d = [[0.0; LANES]; 3];
+    let mut s = [[0.0; LANES]; 3];
+    let mut e = [0.0; LANES];
+    for (l, g) in lanes.iter().enumerate() {
+        let direction = g.own.inverse() * g.direction;
+        for k in 0..3 {
+            d[k][l] = f64::from(direction[k]);
+            s[k][l] = f64::from(g.scale[k]);
+        }
+        e[l] = f64::from(g.stretch) - 1.0;
+    }
+    // M = S + ε d uᵀ with u = S d, so A = M Mᵀ = S² + ε (w dᵀ + d wᵀ) + ε² |u|² d dᵀ with w = S u
+    let mut a = [[[0.0; LANES]; 3]; 3];
+    for l in 0..LANES {
+        let u = [s[0][l] * d[0][l], s[1][l] * d[1][l], s[2][l] * d[2][l]];
+        let w = [s[0][l] * u[0], s[1][l] * u[1], s[2][l] * u[2]];
+        let uu = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+        for i in 0..3 {
+            for j in 0..3 {
+                let diagonal = if i == j { s[i][l] * s[i][l] } else { 0.0 };
+                a[i][j][l] = diagonal + e[l] * (w[i] * d[j][l] + d[i][l] * w[j]) + e[l] * e[l] * uu * d[i][l] * d[j][l];
+            }
+        }
+    }
+    let (vectors, values) = jacobi_eigen(a);
     // the singular values of M are at least min(1, stretch) * min(S), which also keeps them > 0
-    let floor = f64::from(stretch).min(1.0) * s.min_element();
-    let scale = values.map(|v| v.max(0.0).sqrt().max(floor) as f32);
-    (turn, scale)
+    let floor: Lanes = std::array::from_fn(|l| (1.0 + e[l]).min(1.0) * s[0][l].min(s[1][l]).min(s[2][l]));
+    let scales = values.map(|v| -> Lanes { std::array::from_fn(|l| v[l].max(0.0).sqrt().max(floor[l])) });
+    let turns = rotation_quats(&vectors);
+    std::array::from_fn(|l| (turns[l], scales.map(|v| v[l] as f32)))
+}
+
+/// Per lane, the unit quaternion (to rounding; the caller normalises what it is multiplied into) of
+/// the rotation whose columns are `v[column][row]`. Jacobi turns a nearly diagonal matrix by less
+/// than a right angle, so `w` is large (`4 w² = 1 + trace >= 1`) and one formula serves every lane;
+/// a lane turned further takes glam's, which picks the largest component.
+fn rotation_quats(v: &[[Lanes; 3]; 3]) -> [Quat; LANES] {
+    let four_wsq: Lanes = std::array::from_fn(|l| 1.0 + v[0][0][l] + v[1][1][l] + v[2][2][l]);
+    if four_wsq.iter().all(|&f| f >= 1.0) {
+        let inv: Lanes = std::array::from_fn(|l| 0.5 / four_wsq[l].sqrt());
+        let x: Lanes = std::array::from_fn(|l| (v[1][2][l] - v[2][1][l]) * inv[l]);
+        let y: Lanes = std::array::from_fn(|l| (v[2][0][l] - v[0][2][l]) * inv[l]);
+        let z: Lanes = std::array::from_fn(|l| (v[0][1][l] - v[1][0][l]) * inv[l]);
+        let w: Lanes = std::array::from_fn(|l| four_wsq[l] * inv[l]);
+        return std::array::from_fn(|l| DQuat::from_xyzw(x[l], y[l], z[l], w[l]).as_quat());
+    }
+    std::array::from_fn(|l| {
+        let column = |k: usize| glam::DVec3::new(v[k][0][l], v[k][1][l], v[k][2][l]);
+        DQuat::from_mat3(&DMat3::from_cols(column(0), column(1), column(2))).as_quat()
+    })
 }
 
 const JACOBI_SWEEPS: usize = 2;
 
-/// Eigenvectors (columns of a proper rotation) and eigenvalues of a symmetric 3x3 matrix that is
-/// nearly diagonal, by two sweeps of cyclic Jacobi rotations. Each rotation zeroes `a_pq` and
-/// touches only what it changes (the symmetric update: two diagonal entries, the pair in the third
-/// row, and two columns of the eigenvectors), a third of the work of rotating whole rows and columns.
-fn jacobi_eigen(matrix: DMat3) -> (DMat3, [f64; 3]) {
-    let mut a = matrix.to_cols_array_2d(); // symmetric: a[i][j] = A_ij
-    let mut v = [[1.0_f64, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]; // v[col][row]
+/// Per lane, the eigenvectors (columns of a proper rotation, `v[column][row]`) and eigenvalues of a
+/// symmetric 3x3 matrix (`a[i][j]`) that is nearly diagonal, by two sweeps of cyclic Jacobi
+/// rotations. Each rotation zeroes `a_pq` and touches only what it changes (the symmetric update:
+/// two diagonal entries, the pair in the third row, and two columns of the eigenvectors), a third
+/// of the work of rotating whole rows and columns.
+fn jacobi_eigen(mut a: [[Lanes; 3]; 3]) -> ([[Lanes; 3]; 3], [Lanes; 3]) {
+    let mut v = [[[0.0; LANES]; 3]; 3];
+    for (k, column) in v.iter_mut().enumerate() {
+        column[k] = [1.0; LANES];
+    }
     for _sweep in 0..JACOBI_SWEEPS {
         for (p, q, r) in [(0, 1, 2), (0, 2, 1), (1, 2, 0)] {
+            // each step a plain loop over the lanes, so that it vectorises
             let apq = a[p][q];
-            if apq == 0.0 {
-                continue;
+            let mut t = [0.0; LANES];
+            for l in 0..LANES {
+                // t = sign(θ) / (|θ| + sqrt(θ² + 1)) with θ = δ / 2a_pq, multiplied through by 2|a_pq|
+                let delta = a[q][q][l] - a[p][p][l];
+                let hypot = (delta * delta + 4.0 * apq[l] * apq[l]).sqrt();
+                let root = 2.0 * apq[l] * 1.0_f64.copysign(delta) / (delta.abs() + hypot);
+                t[l] = if apq[l] == 0.0 { 0.0 } else { root }; // a_pq already 0: no rotation
             }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
+            let c: Lanes = std::array::from_fn(|l| 1.0 / (t[l] * t[l] + 1.0).sqrt());
+            let s: Lanes = std::array::from_fn(|l| t[l] * c[l]);
             // A <- Jᵀ A J, J the rotation by (c, s) in the (p, q) plane
-            a[p][p] -= t * apq;
-            a[q][q] += t * apq;
-            (a[p][q], a[q][p]) = (0.0, 0.0);
-            let (arp, arq) = (a[r][p], a[r][q]);
-            let (new_rp, new_rq) = (c * arp - s * arq, s * arp + c * arq);
-            (a[r][p], a[p][r], a[r][q], a[q][r]) = (new_rp, new_rp, new_rq, new_rq);
-            let (col_p, col_q) = (v[p], v[q]);
-            for k in 0..3 {
-                v[p][k] = c * col_p[k] - s * col_q[k];
-                v[q][k] = s * col_p[k] + c * col_q[k];
+            for l in 0..LANES {
+                a[p][p][l] -= t[l] * apq[l];
+                a[q][q][l] += t[l] * apq[l];
             }
+            (a[p][q], a[q][p]) = ([0.0; LANES], [0.0; LANES]);
+            let (arp, arq) = (a[r][p], a[r][q]);
+            let new_rp: Lanes = std::array::from_fn(|l| c[l] * arp[l] - s[l] * arq[l]);
+            let new_rq: Lanes = std::array::from_fn(|l| s[l] * arp[l] + c[l] * arq[l]);
+            (a[r][p], a[p][r], a[r][q], a[q][r]) = (new_rp, new_rp, new_rq, new_rq);
+            let (column_p, column_q) = (v[p], v[q]);
+            v[p] = std::array::from_fn(|k| std::array::from_fn(|l| c[l] * column_p[k][l] - s[l] * column_q[k][l]));
+            v[q] = std::array::from_fn(|k| std::array::from_fn(|l| s[l] * column_p[k][l] + c[l] * column_q[k][l]));
         }
     }
-    (DMat3::from_cols_array_2d(&v), [a[0][0], a[1][1], a[2][2]])
+    (v, [a[0][0], a[1][1], a[2][2]])
 }
 
 #[cfg(test)]
@@ -461,18 +542,66 @@ mod tests {
     }
 
     #[test]
-    fn jacobi_diagonalises_a_symmetric_matrix() {
-        // a strongly stretched, tilted Gaussian in its own axes: far from diagonal
+    fn jacobi_diagonalises_symmetric_matrices_lane_by_lane() {
+        // a strongly stretched, tilted Gaussian in its own axes (far from diagonal), a diagonal
+        // matrix (every rotation the identity), and two with equal eigenvalues
         let d = Vec3::new(0.6, -0.5, 0.62).normalize();
         let s = Mat3::from_diagonal(Vec3::new(1.0, 0.3, 0.001));
         let m = s + 0.3 * Mat3::from_cols(d * d.x, d * (d.y * 0.3), d * (d.z * 0.001));
-        let a = m * m.transpose();
-        let (v, values) = jacobi_eigen(a.as_dmat3());
-        let back = v * DMat3::from_diagonal(values.into()) * v.transpose();
-        for c in 0..3 {
-            assert!((back.col(c) - a.as_dmat3().col(c)).abs().max_element() < 1e-5);
+        let turn = Mat3::from_quat(Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.2, 0.9));
+        let matrices = [
+            (m * m.transpose()).as_dmat3(),
+            DMat3::from_diagonal(glam::DVec3::new(2.0, 0.5, 1e-6)),
+            (turn * Mat3::from_diagonal(Vec3::new(1.0, 1.0, 0.01)) * turn.transpose()).as_dmat3(),
+            DMat3::IDENTITY,
+        ];
+        let mut lanes = [[[0.0; LANES]; 3]; 3];
+        for (l, matrix) in matrices.iter().enumerate() {
+            for (i, row) in lanes.iter_mut().enumerate() {
+                for (j, entry) in row.iter_mut().enumerate() {
+                    entry[l] = matrix.col(j)[i];
+                }
+            }
         }
-        assert!((v.determinant() - 1.0).abs() < 1e-5);
+        let (vectors, values) = jacobi_eigen(lanes);
+        for (l, matrix) in matrices.iter().enumerate() {
+            let column = |k: usize| glam::DVec3::new(vectors[k][0][l], vectors[k][1][l], vectors[k][2][l]);
+            let v = DMat3::from_cols(column(0), column(1), column(2));
+            let back =
+                v * DMat3::from_diagonal(glam::DVec3::new(values[0][l], values[1][l], values[2][l])) * v.transpose();
+            for c in 0..3 {
+                assert!((back.col(c) - matrix.col(c)).abs().max_element() < 1e-5, "lane {l}: {back:?} vs {matrix:?}");
+            }
+            assert!((v.determinant() - 1.0).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn rotation_quats_match_glam_for_small_and_large_turns() {
+        // all lanes turned by less than a right angle (the shared formula), then one lane turned
+        // by 170 degrees (glam's formula for every lane)
+        let turns: Vec<Quat> = (0..LANES)
+            .map(|l| Quat::from_axis_angle(Vec3::new(1.0, l as f32, 2.0 - l as f32).normalize(), 0.2 * l as f32))
+            .collect();
+        for large in [false, true] {
+            let mut turns = turns.clone();
+            if large {
+                turns[3] = Quat::from_axis_angle(Vec3::new(0.3, -0.8, 0.5).normalize(), 170f32.to_radians());
+            }
+            let mut v = [[[0.0; LANES]; 3]; 3];
+            for (l, turn) in turns.iter().enumerate() {
+                let m = DMat3::from_quat(turn.as_dquat());
+                for (k, column) in v.iter_mut().enumerate() {
+                    for (row, entry) in column.iter_mut().enumerate() {
+                        entry[l] = m.col(k)[row];
+                    }
+                }
+            }
+            for (got, want) in rotation_quats(&v).iter().zip(&turns) {
+                assert!(got.dot(*want).abs() > 1.0 - 1e-6, "{got:?} vs {want:?}");
+                assert!((got.length() - 1.0).abs() < 1e-6);
+            }
+        }
     }
 
     #[test]
