@@ -2,6 +2,7 @@
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use rayon::prelude::*;
 use sketchrodgs_skin::{Binding, Pose, frame_rotations, skin_in_place};
 
 use crate::arrays::{as_rows, check_shape, contiguous, contiguous_mut};
@@ -70,10 +71,11 @@ fn skin_scatter<'py>(
     if let Some(bad) = ids.iter().find(|&&i| i < 0 || i as usize >= n) {
         return Err(SketchRodGSError::new_err(format!("ids: row {bad} is outside the scene's {n} Gaussians")));
     }
-    let segment: Vec<u32> = contiguous(&segment, "segment")?
-        .iter()
-        .map(|&s| u32::try_from(s).map_err(|_| SketchRodGSError::new_err(format!("segment: negative value {s}"))))
-        .collect::<PyResult<_>>()?;
+    let segment = contiguous(&segment, "segment")?;
+    if let Some(bad) = segment.iter().find(|&&s| s < 0) {
+        return Err(SketchRodGSError::new_err(format!("segment: negative value {bad}")));
+    }
+    let segment: Vec<u32> = segment.iter().map(|&s| s as u32).collect();
     let binding = Binding {
         segment: &segment,
         t: contiguous(&t, "t")?,
@@ -95,14 +97,28 @@ fn skin_scatter<'py>(
         let mut new_quats = vec![[0.0_f32; 4]; g];
         let mut new_scales = vec![[0.0_f32; 3]; g];
         skin_in_place(&pose, &binding, &mut new_means, &mut new_quats, &mut new_scales)?;
+        // Scattered in parallel: each thread owns a contiguous range of the scene's rows and writes
+        // the bound rows in it, in binding order (a row bound twice takes the later, as serially).
+        let part = n.div_ceil(rayon::current_num_threads().max(1)).max(1);
         let means_out = means_out.as_chunks_mut::<3>().0;
         let quats_out = quats_out.as_chunks_mut::<4>().0;
         let scales_out = scales_out.as_chunks_mut::<3>().0;
-        for (k, &row) in ids.iter().enumerate() {
-            means_out[row as usize] = new_means[k];
-            quats_out[row as usize] = new_quats[k];
-            scales_out[row as usize] = new_scales[k];
-        }
+        means_out
+            .par_chunks_mut(part)
+            .zip(quats_out.par_chunks_mut(part))
+            .zip(scales_out.par_chunks_mut(part))
+            .enumerate()
+            .for_each(|(p, ((means, quats), scales))| {
+                let rows = p * part..p * part + means.len();
+                for (k, &row) in ids.iter().enumerate() {
+                    let row = row as usize;
+                    if rows.contains(&row) {
+                        means[row - rows.start] = new_means[k];
+                        quats[row - rows.start] = new_quats[k];
+                        scales[row - rows.start] = new_scales[k];
+                    }
+                }
+            });
         Ok(())
     })?
     .map_err(|e| SketchRodGSError::new_err(e.to_string()))
