@@ -1,7 +1,8 @@
 """Before/after pictures of real pulls (docs/deformation.md): for each pull of `realpulls.PULLS`
 (and any `--case NAME/VIEW` given), the view at rest, the same pull with one binding per
-Gaussian and nothing attached (how it was), and the pull now (needles split, attached parts,
-clamped ends eased), cropped around the rod, with the needle and tear fractions in the captions.
+Gaussian and nothing attached (how it was), and the pull now (needles split, attached parts, the
+shell trimmed where it parts, clamped ends eased), cropped around the rod, with the needle and tear
+fractions in the captions.
 
     python benches/pull_gallery.py OUT_DIR [--case guitar_neck/az270 ...]
 
@@ -96,7 +97,7 @@ def main() -> None:
     for name, view in pulls:
         case = next(c for c in cases if c["name"] == name)
         scene = scenes[case["scene"]]
-        old = pull_case(scene, case, view, extract={"attach": False}, subdivide=False, end_ramp=0.0)
+        old = pull_case(scene, case, view, extract={"attach": False}, subdivide=False, end_ramp=0.0, separate=False)
         new = pull_case(scene, case, view)
         box = crop_box(new, old)
         panels = [

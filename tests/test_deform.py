@@ -65,16 +65,17 @@ def pulls():
         case = next(c for c in cases if c["name"] == name)
         out[name] = (
             pull_case(scenes[case["scene"]], case, view),
-            pull_case(scenes[case["scene"]], case, view, extract={"attach": False}, subdivide=False, end_ramp=0.0),
+            pull_case(
+                scenes[case["scene"]],
+                case,
+                view,
+                extract={"attach": False},
+                subdivide=False,
+                end_ramp=0.0,
+                separate=False,
+            ),
         )
     return out
-
-
-# Measured misses (docs/deformation.md, "Where it still falls short").
-TEAR_MISSES = {
-    "tree_branch_centre": "the branch crosses another and carries a piece of it (0.48 %)",
-    "plant_side_stem_left": "leaves of the main stem touch it near its base (0.40 %)",
-}
 
 
 @pytest.mark.parametrize("name", [name for name, _ in PULLS])
@@ -84,15 +85,7 @@ def test_pulls_leave_no_needles(pulls, name):
     assert now.needles <= before.needles
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=TEAR_MISSES[name]))
-        if name in TEAR_MISSES
-        else name
-        for name, _ in PULLS
-    ],
-)
+@pytest.mark.parametrize("name", [name for name, _ in PULLS])
 def test_pulls_do_not_tear(pulls, name):
     now, _ = pulls[name]
     assert now.tears <= 0.003, now.tears

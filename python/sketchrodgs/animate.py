@@ -142,6 +142,7 @@ class Animation:
         subdivide: split needle Gaussians along the rods first (`Rig`); the animated scene then
             has more rows than `scene`, and `rig.source` maps them back.
         end_ramp: the motion eases in over this many R from a clamped end (`Rig.build`).
+        separate: trim each part's shell where it parts from what it touches (`Rig.build`).
         contact: the rods do not enter the scene's solid parts, nor each other (docs/contact.md).
         friction: Coulomb friction coefficient of the rods against the scene.
         up: the scene's up direction (a unit vector, or "+x" ... "-z"): gravity (`gravity` m/s^2)
@@ -162,6 +163,7 @@ class Animation:
         pins: Sequence[Sequence[int]] = (),
         subdivide: bool = True,
         end_ramp: float = DEFAULT_END_RAMP,
+        separate: bool = True,
         contact: bool = True,
         friction: float = 0.0,
         up: str | Sequence[float] | np.ndarray | None = None,
@@ -200,7 +202,7 @@ class Animation:
                 except SimulationError as err:
                     raise SimulationError(f"rod {k}: {err}") from None
             self.rods.append(rod)
-        self.rig = Rig.build(scene, extractions, self.rods, subdivide=subdivide, end_ramp=end_ramp)
+        self.rig = Rig.build(scene, extractions, self.rods, subdivide=subdivide, end_ramp=end_ramp, separate=separate)
         # the scene's solid parts the rods do not enter: what they do not carry
         self.field: SceneField | None = None
         if contact:

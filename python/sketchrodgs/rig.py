@@ -1,7 +1,8 @@
-"""A scene prepared for its rods (docs/deformation.md, "Subdivision" and "Skinning"): the needle
-Gaussians of each rod split along it (`subdivide`), every rod's Gaussians bound (`skin.BoundRod`),
-and their motion eased in at clamped ends. The rig's scene has more rows than the input; `source`
-maps each row back to the input scene's row.
+"""A scene prepared for its rods (docs/deformation.md, "Subdivision", "Separation" and
+"Skinning"): the needle Gaussians of each rod split along it (`subdivide`), the part's shell
+trimmed where it parts from what it touches (`separation`), every rod's Gaussians bound
+(`skin.BoundRod`), and their motion eased in at clamped ends. The rig's scene has more rows than
+the input; `source` maps each row back to the input scene's row.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from .polyline import arc_lengths, near_box
 from .rod import Rod
 from .scene import GaussianScene
 from .segment import Binding, past_an_end, point_at
+from .separation import trim_shell
 from .skin import BoundRod, skin_into
 
 # Clamped ends ease in over this many R (`Rig.build`).
@@ -54,6 +56,7 @@ class Rig:
         subdivide: bool = True,
         end_ramp: float = DEFAULT_END_RAMP,
         taken: np.ndarray | None = None,
+        separate: bool = True,
     ) -> Rig:
         """Bind each extraction's Gaussians to its rod (at rest in the extraction's polyline).
 
@@ -65,6 +68,8 @@ class Rig:
                 skin would shear off what the end is joined to.
             taken: (N,) bool rows that belong elsewhere (another rod's, in the viewer): never
                 split or bound here.
+            separate: trim the part's shell where it parts from what it touches, by the cut
+                that splits the fewest close pairs (`separation.trim_shell`).
         """
         if len(extractions) != len(rods):
             raise SketchRodGSError(f"{len(extractions)} extractions but {len(rods)} rods")
@@ -90,6 +95,8 @@ class Rig:
                 if taken is not None:
                     fixed[: len(taken)] |= taken
                 scene, source, b = _split_needles(scene, source, b, extraction, fixed)
+            if separate:
+                b = trim_shell(scene.means, b, extraction.radius)
             bound.append(BoundRod.from_binding(scene, b, rod, clamped_end_weights(b, rod, extraction, end_ramp)))
         return cls(scene, source, bound)
 

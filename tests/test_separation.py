@@ -1,0 +1,105 @@
+"""Separation (docs/deformation.md, "Separation"): the part's shell is trimmed by the cut that
+splits the fewest close pairs between what moves and what stays, so a part leaves behind the
+piece of a crossing bar it touches, keeps its own skin, and a tie keeps a Gaussian with the part."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from sketchrodgs import synthetic
+from sketchrodgs.scene import GaussianScene
+from sketchrodgs.segment import Binding, segment_and_bind
+from sketchrodgs.separation import PAIR_RADII, trim_shell
+
+R = 0.01
+AXIS = np.stack([np.linspace(-0.45, 0.45, 91), np.full(91, 0.05), np.zeros(91)], axis=1)
+
+
+def split_pairs(means: np.ndarray, moving_rows: np.ndarray, radius: float) -> int:
+    """Pairs closer than PAIR_RADII R with one Gaussian moving and the other not."""
+    moves = np.zeros(len(means), bool)
+    moves[moving_rows] = True
+    pairs = cKDTree(means).query_pairs(PAIR_RADII * radius, output_type="ndarray")
+    return int((moves[pairs[:, 0]] != moves[pairs[:, 1]]).sum())
+
+
+def tube_with_crossing_bar() -> tuple[GaussianScene, np.ndarray]:
+    """The synthetic straight tube (axis AXIS, R = 0.01) and a bar of radius R running across it
+    along z, its surface touching the tube's; the rows of the bar."""
+    tube = synthetic.tube_scene([synthetic.straight], radius=R, clutter=0, seed=2).scene
+    # the bar: a dense disk of centres per slice, its axis 2.1 R below the tube's
+    ring = np.array([(u, v) for u in np.arange(-R, R + 1e-9, 0.2 * R) for v in np.arange(-R, R + 1e-9, 0.2 * R)])
+    ring = ring[np.hypot(ring[:, 0], ring[:, 1]) <= R]
+    z = np.arange(-0.3, 0.3 + 1e-9, 0.2 * R)  # longer than an attached part: it stays
+    bar = np.array([(u, 0.05 - 2.1 * R + v, w) for w in z for u, v in ring])
+    n = len(bar)
+    scene = GaussianScene.from_colors(
+        np.concatenate([tube.means, bar]),
+        np.concatenate([tube.scales, np.full((n, 3), 0.002)]),
+        np.concatenate([tube.quats, np.tile([1.0, 0, 0, 0], (n, 1))]),
+        np.concatenate([tube.opacities, np.full(n, 0.8)]),
+        np.concatenate([tube.colors, np.full((n, 3), 0.5)]),
+    )
+    return scene, np.arange(len(tube), len(scene))
+
+
+def test_the_part_leaves_the_piece_of_a_crossing_bar_and_keeps_its_own_skin():
+    scene, bar = tube_with_crossing_bar()
+    binding = segment_and_bind(AXIS, scene, R)
+    took = np.intersect1d(binding.gaussian_ids, bar)
+    assert len(took) > 50  # the shell reaches into the bar where it touches the tube
+    trimmed = trim_shell(scene.means, binding, R)
+    kept_bar = np.intersect1d(trimmed.gaussian_ids, bar)
+    assert len(kept_bar) < 0.1 * len(took), (len(kept_bar), len(took))
+    own = np.setdiff1d(binding.gaussian_ids, bar)
+    assert np.isin(own, trimmed.gaussian_ids).mean() > 0.99  # the tube's own skin goes with it
+    before = split_pairs(scene.means, binding.gaussian_ids, R)
+    after = split_pairs(scene.means, trimmed.gaussian_ids, R)
+    assert after < 0.5 * before, (after, before)
+    # the rows kept keep their binding entries
+    entry = {row: k for k, row in enumerate(binding.gaussian_ids.tolist())}
+    rows = np.array([entry[row] for row in trimmed.gaussian_ids.tolist()])
+    assert np.array_equal(binding.offset[rows], trimmed.offset)
+    assert np.array_equal(binding.segment[rows], trimmed.segment)
+
+
+def test_the_cut_splits_the_fewest_pairs_and_keeps_all_it_can():
+    """Against every choice of which shell Gaussians move, on small random clouds."""
+    rng = np.random.default_rng(4)
+    for _ in range(6):
+        core = rng.uniform([-0.3 * R, -0.7 * R, -0.7 * R], [0.3 * R, 0.7 * R, 0.7 * R], (6, 3))
+        shell = rng.uniform([-0.3 * R, 1.05 * R, -0.3 * R], [0.3 * R, 1.6 * R, 0.3 * R], (10, 3))
+        static = rng.uniform([-0.3 * R, 1.4 * R, -0.3 * R], [0.3 * R, 2.0 * R, 0.3 * R], (8, 3))
+        means = np.concatenate([core, shell, static]).astype(np.float32)
+        bound = np.arange(16)
+        # the axis is the x axis: each centre's offset is its (0, y, z)
+        offset = means[bound] * np.array([0, 1, 1], np.float32)
+        binding = Binding(
+            bound,
+            np.zeros(16, np.int32),
+            np.zeros(16, np.float32),
+            offset,
+            np.linalg.norm(offset, axis=1).astype(np.float32),
+            np.zeros(16, bool),
+        )
+        trimmed = trim_shell(means, binding, R)
+        got = split_pairs(means, trimmed.gaussian_ids, R)
+        choices = []
+        for mask in itertools.product([False, True], repeat=10):
+            moving = np.concatenate([np.arange(6), 6 + np.flatnonzero(mask)])
+            choices.append((split_pairs(means, moving, R), set(moving.tolist())))
+        best = min(count for count, _ in choices)
+        assert got == best
+        # of the choices that split the fewest, the kept set holds every one's moving Gaussians
+        kept = set(trimmed.gaussian_ids.tolist())
+        assert all(moving <= kept for count, moving in choices if count == best)
+
+
+def test_nothing_touching_trims_nothing():
+    scene = synthetic.tube_scene([synthetic.straight], radius=R, clutter=0, seed=2).scene
+    binding = segment_and_bind(AXIS, scene, R)
+    trimmed = trim_shell(scene.means, binding, R)
+    assert np.array_equal(trimmed.gaussian_ids, binding.gaussian_ids)
