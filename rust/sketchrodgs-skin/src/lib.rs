@@ -316,7 +316,8 @@ struct Stretch {
 
 /// Gaussians re-diagonalised together. One alone is a chain of dependent square roots and
 /// divisions, each waiting for the last; independent lanes overlap them and vectorise
-/// (docs/deformation.md, "Speed": 108 ns a Gaussian one at a time, 75 ns eight at a time).
+/// (docs/deformation.md, "Speed": on one thread 108 ns a Gaussian one at a time, 75 ns eight at a
+/// time).
 const LANES: usize = 8;
 type Lanes = [f64; LANES];
 
