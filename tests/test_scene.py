@@ -76,6 +76,23 @@ def test_subset_and_replace_make_new_scenes():
     assert moved.scales is scene.scales
 
 
+def test_sort_offsets_are_checked_and_carried_along():
+    f = fields()
+    with pytest.raises(SceneFormatError, match=r"^sort_offsets: expected shape \(4, 3\)"):
+        GaussianScene(**f, sort_offsets=np.zeros((3, 3)))
+    bad = np.zeros((4, 3))
+    bad[2, 1] = np.nan
+    with pytest.raises(SceneFormatError, match="^sort_offsets: NaN or infinite value in row 2"):
+        GaussianScene(**f, sort_offsets=bad)
+    offsets = np.arange(12, dtype=np.float64).reshape(4, 3)
+    scene = GaussianScene(**f, sort_offsets=offsets)
+    assert scene.sort_offsets.dtype == np.float32 and scene.sort_offsets.flags.c_contiguous
+    np.testing.assert_array_equal(scene.subset(np.array([3, 1])).sort_offsets, offsets[[3, 1]])
+    assert scene.replace(means=scene.means + 1).sort_offsets is scene.sort_offsets
+    assert scene.replace(sort_offsets=None).sort_offsets is None
+    assert GaussianScene(**f).sort_offsets is None
+
+
 def test_from_colors_round_trips_the_dc_colour():
     scene = random_scene(5)
     again = GaussianScene.from_colors(scene.means, scene.scales, scene.quats, scene.opacities, scene.colors)

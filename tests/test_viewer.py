@@ -302,8 +302,10 @@ def test_rod_set_splits_needles_and_hides_them_when_removed(plant):
     pull(rods, entry.id, offset=(0.0, -0.05, 0.03))
     moved = np.linalg.norm(rods.means[pieces] - rods.scene.means[pieces], axis=1)
     assert moved.max() > 0.01  # the pieces follow the rod
+    assert rods.scene.sort_offsets[entry.split].any()  # the pieces sort at their parents' centres
     rods.remove(entry.id)
     assert rods.hidden[n:].all() and np.all(rods.scene.opacities[n:] == 0)
+    assert not rods.scene.sort_offsets[:n].any()  # the input's Gaussians sort at their centres again
     exported = rods.export_scene()
     for field in ("means", "quats", "scales", "opacities"):
         np.testing.assert_array_equal(getattr(exported, field), getattr(scene, field))

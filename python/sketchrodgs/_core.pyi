@@ -122,6 +122,7 @@ def rasterize(
     background: tuple[float, float, float] = ...,
     mode: str = "all",
     tiles: npt.NDArray[np.bool_] | None = None,
+    sort_offsets: npt.NDArray[np.float32] | None = None,
 ) -> Rendered: ...
 
 @final
@@ -166,6 +167,7 @@ class RetainedRender:
         moving: npt.NDArray[np.int64],
         background: tuple[float, float, float] = ...,
         mode: str = "all",
+        sort_offsets: npt.NDArray[np.float32] | None = None,
     ) -> RetainedRender: ...
     def frame(
         self, means: npt.NDArray[np.float32], scales: npt.NDArray[np.float32], quats: npt.NDArray[np.float32]

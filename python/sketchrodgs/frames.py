@@ -47,6 +47,7 @@ class FrameRenderer:
             np.ascontiguousarray(moving, np.int64),
             background=_background(background),
             mode=self.mode,
+            sort_offsets=scene.sort_offsets,
         )
 
     def render(self, scene: GaussianScene) -> RenderResult:

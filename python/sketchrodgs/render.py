@@ -122,7 +122,9 @@ def render(
         if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
             raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
         tiles = np.ascontiguousarray(tiles != 0)
-    raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles)
+    raw = _core.rasterize(
+        *_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles, sort_offsets=scene.sort_offsets
+    )
     return RenderResult.from_core(raw, mode)
 
 

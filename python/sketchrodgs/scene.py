@@ -31,6 +31,9 @@ class GaussianScene:
         opacities: (N,) float32 in [0, 1].
         sh: (N, K, 3) float32 spherical-harmonic coefficients per RGB channel, K = (d + 1)^2;
             sh[:, 0] is the DC term (rgb = 0.5 + SH_C0 * sh[:, 0]).
+        sort_offsets: None, or (N, 3) float32: where each Gaussian sorts when rendered, from its
+            mean in its own axes (docs/rendering.md, "Sort points"). The pieces of a split needle
+            sort where their parent's centre is (`subdivide.split`). Scene files do not keep it.
 
     Arrays are stored C-contiguous float32; construction converts and validates them and raises
     `SceneFormatError` naming the field and the first bad row.
@@ -41,6 +44,7 @@ class GaussianScene:
     quats: np.ndarray
     opacities: np.ndarray
     sh: np.ndarray
+    sort_offsets: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = _as_rows(self, "means", 3)
@@ -61,6 +65,9 @@ class GaussianScene:
             if not ok:
                 rows = getattr(self, name).reshape(n, -1)
                 _first_bad(name, ~np.isfinite(rows).all(axis=1), "NaN or infinite value")
+        if self.sort_offsets is not None:
+            _as_rows(self, "sort_offsets", 3, n)
+            _first_bad("sort_offsets", ~np.isfinite(self.sort_offsets).all(axis=1), "NaN or infinite value")
         if n and scale_min <= 0:
             _first_bad("scales", ~(self.scales > 0).all(axis=1), "scales must be > 0")
         if n and (opacity_min < 0 or opacity_max > 1):
@@ -101,11 +108,15 @@ class GaussianScene:
 
     def subset(self, rows: np.ndarray) -> GaussianScene:
         """A new scene with only `rows` (indices or a boolean mask), in that order."""
-        return GaussianScene(self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows])
+        offsets = None if self.sort_offsets is None else self.sort_offsets[rows]
+        return GaussianScene(
+            self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], offsets
+        )
 
-    def replace(self, **arrays: np.ndarray) -> GaussianScene:
+    def replace(self, **arrays: np.ndarray | None) -> GaussianScene:
         """A new scene with some arrays replaced (the others are shared, not copied)."""
-        fields = {name: getattr(self, name) for name in ("means", "scales", "quats", "opacities", "sh")}
+        names = ("means", "scales", "quats", "opacities", "sh", "sort_offsets")
+        fields = {name: getattr(self, name) for name in names}
         fields.update(arrays)
         return GaussianScene(**fields)
 

@@ -122,7 +122,10 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
     counts = counts[counts > 1]
     means, scales = scene.means.copy(), scene.scales.copy()
     opacities = scene.opacities.copy()
-    extra_means, extra_scales, extra_opacity, extra_source = [], [], [], []
+    # each piece sorts where its parent's centre is: at rest the pieces composite in the parent's
+    # place among the other Gaussians (docs/rendering.md, "Sort points")
+    offsets = np.zeros((n, 3), np.float32) if scene.sort_offsets is None else scene.sort_offsets.copy()
+    extra_means, extra_scales, extra_opacity, extra_source, extra_offsets = [], [], [], [], []
     for k in np.unique(counts):
         parents = split_rows[counts == k]
         spacing, std, piece_opacity = piece_table(int(k))
@@ -142,14 +145,20 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
         new_scales = parent_scales.copy()
         new_scales[np.arange(len(parents)), major] = s * sigma
         for i in range(k):
-            centre = scene.means[parents] + (((i - (k - 1) / 2) * d * sigma)[:, None] * direction)
+            shift = (i - (k - 1) / 2) * d * sigma  # along the major axis, from the parent's centre
+            centre = scene.means[parents] + shift[:, None] * direction
+            to_parent = offsets[parents].astype(np.float64)
+            to_parent[np.arange(len(parents)), major] -= shift
             if i == 0:
                 means[parents], scales[parents], opacities[parents] = centre, new_scales, op[:, 0]
+                first_offsets = to_parent
             else:
                 extra_means.append(centre)
                 extra_scales.append(new_scales)
                 extra_opacity.append(op[:, i])
                 extra_source.append(parents)
+                extra_offsets.append(to_parent)
+        offsets[parents] = first_offsets
     source = np.concatenate([np.arange(n, dtype=np.int64)] + [np.asarray(s, np.int64) for s in extra_source])
     if len(source) == n:
         return scene, source, np.zeros(0, np.int64)
@@ -159,6 +168,7 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
         scene.quats[source],
         np.concatenate([opacities] + extra_opacity).astype(np.float32),
         scene.sh[source],
+        np.concatenate([offsets] + extra_offsets).astype(np.float32),
     )
     piece_rows = np.concatenate([split_rows, np.arange(n, len(source), dtype=np.int64)])
     return new, source, piece_rows

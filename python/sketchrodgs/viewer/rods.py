@@ -233,6 +233,11 @@ class RodSet:
             for field, values in arrays.items():
                 values[entry.split] = getattr(self.input_scene, field)[entry.split]
             arrays["opacities"][entry.pieces] = 0.0
+            if self.scene.sort_offsets is not None:  # the input's Gaussians sort where they did
+                offsets = self.scene.sort_offsets.copy()
+                given = self.input_scene.sort_offsets
+                offsets[entry.split] = 0.0 if given is None else given[entry.split]
+                arrays["sort_offsets"] = offsets
             self.scene = self.scene.replace(**arrays)
             self.hidden[entry.pieces] = True
             for rows in (entry.gaussian_ids, entry.split):

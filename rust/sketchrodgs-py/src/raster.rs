@@ -24,8 +24,9 @@ fn raster_err(err: RasterError) -> PyErr {
 /// seconds and the visible and pair counts. `mode` is "all"; "index" (rgb and depth None); or
 /// "solid" (as "index", with alpha exact only below 0.5: `RenderMode::IndexSolid`).
 /// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
+/// `sort_offsets` (N, 3) float32: where each Gaussian sorts, from its mean in its own axes.
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sort_offsets = None))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -44,8 +45,9 @@ fn rasterize<'py>(
     background: (f32, f32, f32),
     mode: &str,
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
+    sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
 ) -> PyResult<Rendered> {
-    let scene = SceneInput::new(means, scales, quats, opacities, sh)?;
+    let scene = SceneInput::new(means, scales, quats, opacities, sh, sort_offsets)?;
     let splats = scene.splats()?;
     let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
     let options = options_of(background, mode)?;
@@ -74,6 +76,7 @@ struct SceneInput<'py> {
     quats: PyReadonlyArray2<'py, f32>,
     opacities: PyReadonlyArray1<'py, f32>,
     sh: PyReadonlyArray3<'py, f32>,
+    sort_offsets: Option<PyReadonlyArray2<'py, f32>>,
 }
 
 impl<'py> SceneInput<'py> {
@@ -83,6 +86,7 @@ impl<'py> SceneInput<'py> {
         quats: &Bound<'py, PyArray2<f32>>,
         opacities: &Bound<'py, PyArray1<f32>>,
         sh: &Bound<'py, PyArray3<f32>>,
+        sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
     ) -> PyResult<Self> {
         let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
         let (opacities, sh) = (opacities.try_readonly()?, sh.try_readonly()?);
@@ -92,11 +96,15 @@ impl<'py> SceneInput<'py> {
         check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
         check_shape("opacities", opacities.shape(), &[Some(n)])?;
         check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
-        Ok(Self { means, scales, quats, opacities, sh })
+        let sort_offsets = sort_offsets.map(|o| o.try_readonly()).transpose()?;
+        if let Some(offsets) = &sort_offsets {
+            check_shape("sort_offsets", offsets.shape(), &[Some(n), Some(3)])?;
+        }
+        Ok(Self { means, scales, quats, opacities, sh, sort_offsets })
     }
 
     fn splats(&self) -> PyResult<Splats<'_>> {
-        Splats::from_flat(
+        let splats = Splats::from_flat(
             contiguous(&self.means, "means")?,
             contiguous(&self.scales, "scales")?,
             contiguous(&self.quats, "quats")?,
@@ -104,7 +112,11 @@ impl<'py> SceneInput<'py> {
             contiguous(&self.sh, "sh")?,
             self.sh.shape()[1],
         )
-        .map_err(raster_err)
+        .map_err(raster_err)?;
+        match &self.sort_offsets {
+            None => Ok(splats),
+            Some(offsets) => splats.with_sort_offsets(contiguous(offsets, "sort_offsets")?).map_err(raster_err),
+        }
     }
 }
 
@@ -151,7 +163,7 @@ pub struct RetainedRender {
 #[pymethods]
 impl RetainedRender {
     #[new]
-    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all"))]
+    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sort_offsets = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -170,8 +182,9 @@ impl RetainedRender {
         moving: &Bound<'_, PyArray1<i64>>,
         background: (f32, f32, f32),
         mode: &str,
+        sort_offsets: Option<&Bound<'_, PyArray2<f32>>>,
     ) -> PyResult<Self> {
-        let scene = SceneInput::new(means, scales, quats, opacities, sh)?;
+        let scene = SceneInput::new(means, scales, quats, opacities, sh, sort_offsets)?;
         let splats = scene.splats()?;
         let n = splats.len();
         let moving = moving.try_readonly()?;

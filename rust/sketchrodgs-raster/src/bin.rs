@@ -31,7 +31,7 @@ pub fn sort_by_depth(splats: &[Splat2D], rects: &[TileRect]) -> Vec<u32> {
         .enumerate()
         .with_min_len(MIN_GAUSSIANS_PER_TASK)
         .filter(|(_, (_, r))| !r.is_empty())
-        .map(|(i, (s, _))| (u64::from(s.depth.to_bits()) << 32) | i as u64)
+        .map(|(i, (s, _))| (u64::from(s.sort_depth.to_bits()) << 32) | i as u64)
         .collect();
     radix_sort_by_high_word(&mut keys);
     let mut order = Vec::new();

@@ -27,7 +27,7 @@
 //! let quats = [[1.0, 0.0, 0.0, 0.0]];
 //! let opacities = [0.9];
 //! let sh = [1.0, 0.0, -1.0]; // degree 0: one RGB coefficient per Gaussian
-//! let splats = Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: 1 };
+//! let splats = Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: 1, sort_offsets: None };
 //! let out = rasterize(&splats, &camera, &RenderOptions::default()).unwrap();
 //! assert_eq!(out.index[24 * 64 + 32], 0); // the pixel under the mean sees Gaussian 0
 //! assert_eq!(out.index[0], -1);           // a corner sees nothing
@@ -118,6 +118,10 @@ pub struct Splats<'a> {
     pub sh: &'a [f32],
     /// Coefficients per channel K = (d+1)², d in 0..=3.
     pub sh_coeffs: usize,
+    /// (N) where each Gaussian sorts, from its mean in its own axes (turned by its rotation),
+    /// or None: at the mean. The pieces of a split needle sort where their parent's centre is,
+    /// so that at rest they composite as the parent did (docs/rendering.md, "Sort points").
+    pub sort_offsets: Option<&'a [Vec3]>,
 }
 
 impl<'a> Splats<'a> {
@@ -144,9 +148,21 @@ impl<'a> Splats<'a> {
             opacities,
             sh,
             sh_coeffs,
+            sort_offsets: None,
         };
         splats.validate()?;
         Ok(splats)
+    }
+
+    /// These splats sorting at `offsets` (N*3, row-major; see [`Splats::sort_offsets`]).
+    pub fn with_sort_offsets(self, offsets: &'a [f32]) -> Result<Self, RasterError> {
+        let wrong =
+            || RasterError::LengthMismatch { name: "sort_offsets", expected: self.len() * 3, got: offsets.len() };
+        let rows: &[Vec3] = bytemuck::try_cast_slice(offsets).map_err(|_| wrong())?;
+        if rows.len() != self.len() {
+            return Err(wrong());
+        }
+        Ok(Self { sort_offsets: Some(rows), ..self })
     }
 
     /// Number of Gaussians.
@@ -178,6 +194,11 @@ impl<'a> Splats<'a> {
             if got != expected {
                 return Err(RasterError::LengthMismatch { name, expected, got });
             }
+        }
+        if let Some(offsets) = self.sort_offsets
+            && offsets.len() != n
+        {
+            return Err(RasterError::LengthMismatch { name: "sort_offsets", expected: n, got: offsets.len() });
         }
         Ok(())
     }

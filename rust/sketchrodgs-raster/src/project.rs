@@ -23,6 +23,8 @@ pub struct Splat2D {
     pub color: [f32; 3],
     /// Camera z of the centre.
     pub depth: f32,
+    /// Camera z it sorts by: of its sort point ([`Splats::sort_offsets`]), else `depth`.
+    pub sort_depth: f32,
     /// Below this `power`, `opacity * exp(power) < 1/255` for certain (with a 1e-3 margin for
     /// rounding), so compositing can skip a group of pixels without evaluating `exp`.
     pub power_floor: f32,
@@ -67,7 +69,17 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
     let k = splats.sh_coeffs;
     let one = |i: usize| {
         let sh = if with_color { splats.sh.get(i * k * 3..(i + 1) * k * 3) } else { None };
-        project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, &cam, camera)
+        let sort_offset = splats.sort_offsets.map_or(Vec3::ZERO, |offsets| offsets[i]);
+        project_one(
+            splats.means[i],
+            splats.scales[i],
+            splats.quats[i],
+            splats.opacities[i],
+            sh,
+            sort_offset,
+            &cam,
+            camera,
+        )
     };
     let Some(mask) = tiles else {
         let (mut projected, mut rects) = (Vec::new(), Vec::new());
@@ -200,13 +212,16 @@ fn tile_rect_of(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -
     }
 }
 
-/// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted.
+/// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted; `sort_offset`
+/// (in its own axes) moves the point it sorts by off its mean.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn project_one(
     mean: Vec3,
     scale: Vec3,
     quat: [f32; 4],
     opacity: f32,
     sh: Option<&[f32]>,
+    sort_offset: Vec3,
     cam: &CameraF32,
     camera: &Camera,
 ) -> Option<(Splat2D, TileRect)> {
@@ -227,7 +242,8 @@ pub(crate) fn project_one(
     let j0 = Vec3::new(cam.fx * inv_z, 0.0, -cam.fx * tx * inv_z * inv_z);
     let j1 = Vec3::new(0.0, cam.fy * inv_z, -cam.fy * ty * inv_z * inv_z);
     // Rows of T = J W; Σ2D = T R S Sᵀ Rᵀ Tᵀ = (T R S)(T R S)ᵀ.
-    let rot_t = rotation(quat).transpose() * cam.rotation.transpose();
+    let own = rotation(quat);
+    let rot_t = own.transpose() * cam.rotation.transpose();
     let m0 = scale * (rot_t * j0);
     let m1 = scale * (rot_t * j1);
     let a = m0.dot(m0) + LOW_PASS;
@@ -285,7 +301,14 @@ pub(crate) fn project_one(
         None => [0.0; 3],
     };
     let power_floor = -0.5 * tau - 1e-3;
-    let splat = Splat2D { mean: mean2d, conic, opacity, color, depth: z, power_floor, pixel_box };
+    // a sort point behind the camera sorts first (the key is a positive float's bits)
+    let sort_depth = if sort_offset == Vec3::ZERO {
+        z
+    } else {
+        let at = (cam.rotation * (mean + own * sort_offset) + cam.translation).z;
+        if at > 0.0 { at } else { 0.0 }
+    };
+    let splat = Splat2D { mean: mean2d, conic, opacity, color, depth: z, sort_depth, power_floor, pixel_box };
     Some((splat, rect))
 }
 

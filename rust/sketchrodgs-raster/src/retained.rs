@@ -22,6 +22,8 @@ pub struct Retained {
     /// Scene rows that may move, ascending; with their opacities and SH (which do not change).
     moving: Vec<u32>,
     opacities: Vec<f32>,
+    /// Their sort offsets (`Splats::sort_offsets`), which turn with them.
+    sort_offsets: Option<Vec<Vec3>>,
     sh: Vec<f32>,
     sh_coeffs: usize,
     n: usize,
@@ -94,6 +96,7 @@ impl Retained {
         let sh =
             moving.iter().flat_map(|&r| &splats.sh[r as usize * k * 3..(r as usize + 1) * k * 3]).copied().collect();
         let opacities = moving.iter().map(|&r| splats.opacities[r as usize]).collect();
+        let sort_offsets = splats.sort_offsets.map(|o| moving.iter().map(|&r| o[r as usize]).collect());
         let image = blank(camera, options)?;
         let (grid_x, grid_y) = camera.tile_grid();
         let touched = vec![true; (grid_x * grid_y) as usize]; // the first frame blends every tile
@@ -102,6 +105,7 @@ impl Retained {
             options: *options,
             moving,
             opacities,
+            sort_offsets,
             sh,
             sh_coeffs: k,
             n,
@@ -148,7 +152,8 @@ impl Retained {
             .filter_map(|(j, &r)| {
                 let r = r as usize;
                 let sh = if with_color { self.sh.get(j * k * 3..(j + 1) * k * 3) } else { None };
-                project_one(means[r], scales[r], quats[r], self.opacities[j], sh, &cam, &self.camera)
+                let sort_offset = self.sort_offsets.as_ref().map_or(Vec3::ZERO, |o: &Vec<Vec3>| o[j]);
+                project_one(means[r], scales[r], quats[r], self.opacities[j], sh, sort_offset, &cam, &self.camera)
                     .map(|(s, rect)| (r as u32, s, rect))
             })
             .collect();
@@ -156,7 +161,7 @@ impl Retained {
         let projected_at = std::time::Instant::now();
         // the moving Gaussians front to back, ties by row (as a full render's sort)
         let mut order: Vec<u32> = (0..moving.splats.len() as u32).collect();
-        order.sort_by_key(|&i| (moving.splats[i as usize].depth.to_bits(), moving.id(i as usize)));
+        order.sort_by_key(|&i| (moving.splats[i as usize].sort_depth.to_bits(), moving.id(i as usize)));
         let (grid_x, grid_y) = self.camera.tile_grid();
         let n_tiles = (grid_x * grid_y) as usize;
         let mut per_tile: Vec<Vec<u32>> = vec![Vec::new(); n_tiles];
@@ -206,7 +211,7 @@ fn merge<'a>(
     moving: &Projected,
     tile: &[u32],
 ) -> Vec<u32> {
-    let key = |p: &Projected, i: u32| (p.splats[i as usize].depth.to_bits(), p.id(i as usize));
+    let key = |p: &Projected, i: u32| (p.splats[i as usize].sort_depth.to_bits(), p.id(i as usize));
     let mut out = Vec::with_capacity(tile.len());
     let mut m = tile.iter().peekable();
     for list in lists {
@@ -251,6 +256,9 @@ mod tests {
         let sh: Vec<f32> = (0..n * k * 3).map(|_| next() - 0.5).collect();
         // equal depths between a static and a moving Gaussian: the lower row goes first
         means[7] = means[8];
+        // every third Gaussian sorts off its mean (as a split needle's pieces do), static and moving
+        let sort_offsets: Vec<Vec3> =
+            (0..n).map(|i| if i % 3 == 0 { Vec3::new(0.3, -0.2, 0.5 * (next() - 0.5)) } else { Vec3::ZERO }).collect();
         let moving: Vec<u32> = (0..n as u32).filter(|r| r % 10 == 8).collect();
         let camera = Camera {
             width: 150,
@@ -264,15 +272,26 @@ mod tests {
         for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid] {
             let options = RenderOptions { background: [0.3, 0.2, 0.1], mode };
             let splats = |means: &[Vec3], quats: &[[f32; 4]]| {
-                rasterize(
-                    &Splats { means, scales: &scales, quats, opacities: &opacities, sh: &sh, sh_coeffs: k },
-                    &camera,
-                    &options,
-                )
-                .unwrap()
+                let splats = Splats {
+                    means,
+                    scales: &scales,
+                    quats,
+                    opacities: &opacities,
+                    sh: &sh,
+                    sh_coeffs: k,
+                    sort_offsets: Some(&sort_offsets),
+                };
+                rasterize(&splats, &camera, &options).unwrap()
             };
-            let first =
-                Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: k };
+            let first = Splats {
+                means: &means,
+                scales: &scales,
+                quats: &quats,
+                opacities: &opacities,
+                sh: &sh,
+                sh_coeffs: k,
+                sort_offsets: Some(&sort_offsets),
+            };
             let mut retained = Retained::new(&first, &camera, &options, &moving).unwrap();
             let (mut means, mut quats) = (means.clone(), quats.clone());
             for frame in 0..4 {

@@ -39,6 +39,7 @@ impl Scene {
             opacities: &self.opacities,
             sh: &self.sh,
             sh_coeffs: self.k,
+            sort_offsets: None,
         }
     }
 
@@ -187,6 +188,40 @@ fn equal_depths_blend_in_ascending_index_order() {
     let c0 = 0.5 + project::SH_C0;
     assert!((out.rgb[centre * 3] - (c0 * 0.5 + 0.5 * 0.25)).abs() < 1e-6);
     assert!((out.rgb[centre * 3 + 1] - (0.5 * 0.5 + c0 * 0.25)).abs() < 1e-6);
+}
+
+#[test]
+fn a_sort_offset_moves_where_a_gaussian_sorts_and_only_that() {
+    // Two overlapping opaque Gaussians, row 0 at z = 2 in front of row 1 at z = 3. Row 1 sorting
+    // half a unit in front of row 0 is blended first: its offset, +x in its own axes, points
+    // along world -z after its quarter turn about y.
+    let mut scene = Scene::random(2, 1, 3);
+    scene.means = vec![Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.0, 0.0, 3.0)];
+    scene.scales = vec![Vec3::splat(0.05), Vec3::splat(0.08)];
+    let quarter = glam::Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+    scene.quats = vec![[1.0, 0.0, 0.0, 0.0], [quarter.w, quarter.x, quarter.y, quarter.z]];
+    scene.opacities = vec![0.95; 2];
+    let cam = camera(32, 32);
+    let centre = 16 * 32 + 16;
+    let plain = render(&scene, &cam);
+    assert_eq!(plain.index[centre], 0);
+    let offsets = [Vec3::ZERO, Vec3::new(1.5, 0.0, 0.0)]; // world -1.5 z: sorts at z = 1.5
+    assert!(((quarter * offsets[1]).z + 1.5).abs() < 1e-6);
+    let splats = Splats { sort_offsets: Some(&offsets), ..scene.splats() };
+    let moved = rasterize(&splats, &cam, &RenderOptions::default()).unwrap();
+    assert_eq!(moved.index[centre], 1);
+    assert_eq!(moved.index_depth[centre], 3.0); // its depth is still its mean's
+    // zero offsets are no offsets, to the bit
+    let zeros = [Vec3::ZERO; 2];
+    let same = rasterize(&Splats { sort_offsets: Some(&zeros), ..scene.splats() }, &cam, &RenderOptions::default());
+    let same = same.unwrap();
+    assert_eq!((same.rgb, same.index, same.alpha), (plain.rgb, plain.index, plain.alpha));
+    // a wrong length is an error naming the field
+    let short = [Vec3::ZERO; 1];
+    assert!(matches!(
+        rasterize(&Splats { sort_offsets: Some(&short), ..scene.splats() }, &cam, &RenderOptions::default()),
+        Err(RasterError::LengthMismatch { name: "sort_offsets", .. })
+    ));
 }
 
 #[test]
