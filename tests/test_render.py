@@ -81,6 +81,21 @@ def test_single_isotropic_gaussian_peak_colour_and_footprint():
     assert (lit.min(), lit.max()) == (32 - reach, 32 + reach)
 
 
+def test_shared_sh_rows_and_sort_offsets_render_as_their_plain_scene():
+    """A scene whose Gaussians share SH rows renders as the same scene with each row copied; zero
+    sort offsets render as none (docs/rendering.md, "Sort points")."""
+    scene = random_scene(300, sh_degree=2, seed=5)
+    rows = np.arange(300) % 37
+    shared = GaussianScene(scene.means, scene.scales, scene.quats, scene.opacities, scene.sh[:37], sh_rows=rows)
+    plain = shared.replace(sh=shared.row_sh())
+    cam = Camera.look_at((0.3, -0.4, -4.0), (0, 0, 0), width=80, height=56, fov_y_deg=50)
+    a, b = render(shared, cam), render(plain, cam)
+    np.testing.assert_array_equal(a.rgb, b.rgb)
+    np.testing.assert_array_equal(a.index, b.index)
+    zeros = render(plain.replace(sort_offsets=np.zeros((300, 3))), cam)
+    np.testing.assert_array_equal(zeros.rgb, b.rgb)
+
+
 def test_alpha_is_capped_at_0_99():
     scene = scene_of([0.0, 0.0, 2.0], 0.05, 1.0, colors=(1.0, 0.5, 0.0))
     r = render(scene, camera(), background=(0.0, 0.0, 1.0))

@@ -93,6 +93,30 @@ def test_sort_offsets_are_checked_and_carried_along():
     assert GaussianScene(**f).sort_offsets is None
 
 
+def test_shared_sh_rows_are_checked_and_read_per_gaussian():
+    f = fields(6)
+    table = f["sh"][:3].copy()
+    rows = np.array([2, 0, 1, 1, 2, 0])
+    scene = GaussianScene(**{**f, "sh": table}, sh_rows=rows)
+    assert scene.sh_rows.dtype == np.uint32 and scene.sh is table
+    np.testing.assert_array_equal(scene.row_sh(), table[rows])
+    np.testing.assert_array_equal(scene.colors, np.clip(0.5 + 0.28209479177387814 * table[rows, 0], 0, 1))
+    part = scene.subset(np.array([5, 0]))
+    assert part.sh is table  # still shared
+    np.testing.assert_array_equal(part.row_sh(), table[[0, 2]])
+    own = scene.replace(sh=table[rows])  # a new sh without rows is one row per Gaussian
+    assert own.sh_rows is None
+    np.testing.assert_array_equal(own.row_sh(), scene.row_sh())
+    with pytest.raises(SceneFormatError, match="^sh_rows: row outside the 3 rows of sh in row 4"):
+        GaussianScene(**{**f, "sh": table}, sh_rows=np.array([0, 1, 2, 0, 3, 1]))
+    with pytest.raises(SceneFormatError, match="^sh_rows: row outside the 3 rows of sh in row 0"):
+        GaussianScene(**{**f, "sh": table}, sh_rows=np.array([-1, 1, 2, 0, 0, 1]))
+    with pytest.raises(SceneFormatError, match=r"^sh_rows: expected \(6,\) integers"):
+        GaussianScene(**{**f, "sh": table}, sh_rows=np.zeros(5, np.int64))
+    with pytest.raises(SceneFormatError, match=r"^sh: expected shape \(6, K, 3\)"):
+        GaussianScene(**{**f, "sh": table})
+
+
 def test_from_colors_round_trips_the_dc_colour():
     scene = random_scene(5)
     again = GaussianScene.from_colors(scene.means, scene.scales, scene.quats, scene.opacities, scene.colors)

@@ -58,12 +58,15 @@ def test_split_keeps_the_rows_and_maps_the_pieces_back():
     assert sorted(np.bincount(source[len(scene) :], minlength=len(scene))[[3, 10, 11, 40]]) == [0, 1, 3, 15]
     assert set(pieces) == set(np.flatnonzero(np.isin(source, [3, 10, 40])))
     untouched = np.setdiff1d(np.arange(len(scene)), [3, 10, 40])
-    for field in ("means", "scales", "quats", "opacities", "sh"):
+    for field in ("means", "scales", "quats", "opacities"):
         np.testing.assert_array_equal(getattr(new, field)[untouched], getattr(scene, field)[untouched])
+    # the pieces take their parent's SH row from the input's table, not a copy of it
+    assert new.sh is scene.sh
+    np.testing.assert_array_equal(new.row_sh(), scene.sh[source])
     for parent in (3, 10, 40):
         mine = np.flatnonzero(source == parent)
         np.testing.assert_array_equal(new.quats[mine], np.repeat(scene.quats[[parent]], len(mine), axis=0))
-        np.testing.assert_array_equal(new.sh[mine], np.repeat(scene.sh[[parent]], len(mine), axis=0))
+        np.testing.assert_array_equal(new.row_sh()[mine], np.repeat(scene.sh[[parent]], len(mine), axis=0))
         major = int(np.argmax(scene.scales[parent]))
         assert np.all(new.scales[mine, major] < scene.scales[parent, major])
         minor = [i for i in range(3) if i != major]

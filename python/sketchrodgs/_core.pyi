@@ -122,6 +122,7 @@ def rasterize(
     background: tuple[float, float, float] = ...,
     mode: str = "all",
     tiles: npt.NDArray[np.bool_] | None = None,
+    sh_rows: npt.NDArray[np.uint32] | None = None,
     sort_offsets: npt.NDArray[np.float32] | None = None,
 ) -> Rendered: ...
 
@@ -167,6 +168,7 @@ class RetainedRender:
         moving: npt.NDArray[np.int64],
         background: tuple[float, float, float] = ...,
         mode: str = "all",
+        sh_rows: npt.NDArray[np.uint32] | None = None,
         sort_offsets: npt.NDArray[np.float32] | None = None,
     ) -> RetainedRender: ...
     def frame(

@@ -47,6 +47,7 @@ class FrameRenderer:
             np.ascontiguousarray(moving, np.int64),
             background=_background(background),
             mode=self.mode,
+            sh_rows=scene.sh_rows,
             sort_offsets=scene.sort_offsets,
         )
 

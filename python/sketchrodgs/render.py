@@ -123,7 +123,12 @@ def render(
             raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
         tiles = np.ascontiguousarray(tiles != 0)
     raw = _core.rasterize(
-        *_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles, sort_offsets=scene.sort_offsets
+        *_core_inputs(scene, camera),
+        background=bg,
+        mode=mode,
+        tiles=tiles,
+        sh_rows=scene.sh_rows,
+        sort_offsets=scene.sort_offsets,
     )
     return RenderResult.from_core(raw, mode)
 

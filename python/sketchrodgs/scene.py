@@ -34,6 +34,10 @@ class GaussianScene:
         sort_offsets: None, or (N, 3) float32: where each Gaussian sorts when rendered, from its
             mean in its own axes (docs/rendering.md, "Sort points"). The pieces of a split needle
             sort where their parent's centre is (`subdivide.split`). Scene files do not keep it.
+        sh_rows: None, or (N,) uint32: the row of `sh`, then a table of any number of rows, each
+            Gaussian takes its coefficients from. The pieces of a split needle share their
+            parent's (`subdivide.split`), so a split scene does not copy the SH of the whole
+            scene. `row_sh()` gives the (N, K, 3) coefficients per Gaussian either way.
 
     Arrays are stored C-contiguous float32; construction converts and validates them and raises
     `SceneFormatError` naming the field and the first bad row.
@@ -45,6 +49,7 @@ class GaussianScene:
     opacities: np.ndarray
     sh: np.ndarray
     sort_offsets: np.ndarray | None = None
+    sh_rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = _as_rows(self, "means", 3)
@@ -54,8 +59,11 @@ class GaussianScene:
         if opacities.shape != (n,):
             raise SceneFormatError(f"opacities: expected shape ({n},), got {opacities.shape}")
         sh = _as_float32(self, "sh")
-        if sh.ndim != 3 or sh.shape[0] != n or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16):
-            raise SceneFormatError(f"sh: expected shape ({n}, K, 3) with K in 1, 4, 9, 16, got {sh.shape}")
+        rows = "M" if self.sh_rows is not None else n
+        if sh.ndim != 3 or sh.shape[2] != 3 or sh.shape[1] not in (1, 4, 9, 16) or rows not in ("M", sh.shape[0]):
+            raise SceneFormatError(f"sh: expected shape ({rows}, K, 3) with K in 1, 4, 9, 16, got {sh.shape}")
+        if self.sh_rows is not None:
+            _check_sh_rows(self, n, sh.shape[0])
         # One pass in Rust over all arrays; rows are looked for only when something is off.
         fields = ("means", "scales", "quats", "opacities", "sh")
         finite, scale_min, (opacity_min, opacity_max), (quat_min, quat_max) = _core.scene_summary(
@@ -91,7 +99,12 @@ class GaussianScene:
     @property
     def colors(self) -> np.ndarray:
         """(N, 3) float32 view-independent colour from the DC term, clipped to [0, 1]."""
-        return np.clip(0.5 + SH_C0 * self.sh[:, 0], 0.0, 1.0).astype(np.float32)
+        dc = self.sh[:, 0] if self.sh_rows is None else self.sh[self.sh_rows, 0]
+        return np.clip(0.5 + SH_C0 * dc, 0.0, 1.0).astype(np.float32)
+
+    def row_sh(self) -> np.ndarray:
+        """(N, K, 3) float32 the SH coefficients of each Gaussian (a copy where rows share them)."""
+        return self.sh if self.sh_rows is None else self.sh[self.sh_rows]
 
     @classmethod
     def from_colors(
@@ -109,14 +122,21 @@ class GaussianScene:
     def subset(self, rows: np.ndarray) -> GaussianScene:
         """A new scene with only `rows` (indices or a boolean mask), in that order."""
         offsets = None if self.sort_offsets is None else self.sort_offsets[rows]
+        if self.sh_rows is None:
+            sh, sh_rows = self.sh[rows], None
+        else:  # the rows keep sharing the table
+            sh, sh_rows = self.sh, self.sh_rows[rows]
         return GaussianScene(
-            self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], self.sh[rows], offsets
+            self.means[rows], self.scales[rows], self.quats[rows], self.opacities[rows], sh, offsets, sh_rows
         )
 
     def replace(self, **arrays: np.ndarray | None) -> GaussianScene:
-        """A new scene with some arrays replaced (the others are shared, not copied)."""
-        names = ("means", "scales", "quats", "opacities", "sh", "sort_offsets")
+        """A new scene with some arrays replaced (the others are shared, not copied). A new `sh`
+        without `sh_rows` is one row per Gaussian."""
+        names = ("means", "scales", "quats", "opacities", "sh", "sort_offsets", "sh_rows")
         fields = {name: getattr(self, name) for name in names}
+        if "sh" in arrays and "sh_rows" not in arrays:
+            fields["sh_rows"] = None
         fields.update(arrays)
         return GaussianScene(**fields)
 
@@ -137,6 +157,14 @@ def _as_rows(scene: GaussianScene, name: str, width: int, n: int | None = None) 
         want = f"({'N' if n is None else n}, {width})"
         raise SceneFormatError(f"{name}: expected shape {want}, got {array.shape}")
     return int(array.shape[0])
+
+
+def _check_sh_rows(scene: GaussianScene, n: int, table_rows: int) -> None:
+    rows = np.asarray(scene.sh_rows)
+    if rows.shape != (n,) or rows.dtype.kind not in "iu":
+        raise SceneFormatError(f"sh_rows: expected ({n},) integers, got shape {rows.shape} of {rows.dtype}")
+    _first_bad("sh_rows", (rows < 0) | (rows >= table_rows), f"row outside the {table_rows} rows of sh")
+    object.__setattr__(scene, "sh_rows", np.ascontiguousarray(rows, dtype=np.uint32))
 
 
 def _first_bad(name: str, bad_rows: np.ndarray | np.bool_, what: str) -> None:

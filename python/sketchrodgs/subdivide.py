@@ -167,8 +167,9 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
         np.concatenate([scales] + extra_scales).astype(np.float32),
         scene.quats[source],
         np.concatenate([opacities] + extra_opacity).astype(np.float32),
-        scene.sh[source],
+        scene.sh,  # shared: each piece takes its parent's row, not a copy of every row
         np.concatenate([offsets] + extra_offsets).astype(np.float32),
+        source if scene.sh_rows is None else scene.sh_rows[source],
     )
     piece_rows = np.concatenate([split_rows, np.arange(n, len(source), dtype=np.int64)])
     return new, source, piece_rows

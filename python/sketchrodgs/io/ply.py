@@ -116,13 +116,13 @@ def write_ply(scene: GaussianScene, path: str | os.PathLike[str]) -> None:
     Values are stored raw as 3DGS training stores them (log scale, logit opacity); opacities of
     exactly 0 or 1 are moved 1e-7 inside so their logit stays finite.
     """
-    n, k = len(scene), scene.sh.shape[1]
+    n, k, sh = len(scene), scene.sh.shape[1], scene.row_sh()
     names = reference_property_names(scene.sh_degree)
     table = np.zeros((n, len(names)), dtype=np.float32)
     table[:, 0:3] = scene.means
-    table[:, 6:9] = scene.sh[:, 0]
+    table[:, 6:9] = sh[:, 0]
     # channel-major f_rest: (N, K-1, 3) -> (N, 3, K-1) -> flat
-    table[:, 9 : 9 + 3 * (k - 1)] = scene.sh[:, 1:].transpose(0, 2, 1).reshape(n, -1)
+    table[:, 9 : 9 + 3 * (k - 1)] = sh[:, 1:].transpose(0, 2, 1).reshape(n, -1)
     tail = 9 + 3 * (k - 1)
     opacity = np.clip(scene.opacities.astype(np.float64), _OPACITY_EPS, 1 - _OPACITY_EPS)
     table[:, tail] = np.log(opacity / (1 - opacity))

@@ -43,7 +43,7 @@ def write_splat(scene: GaussianScene, path: str | os.PathLike[str]) -> None:
     records = np.empty(len(scene), dtype=RECORD)
     records["position"] = scene.means
     records["scale"] = scene.scales
-    rgb = 0.5 + SH_C0 * scene.sh[:, 0].astype(np.float64)
+    rgb = 0.5 + SH_C0 * scene.row_sh()[:, 0].astype(np.float64)
     records["rgba"][:, :3] = np.clip(np.rint(rgb * 255), 0, 255)
     records["rgba"][:, 3] = np.clip(np.rint(scene.opacities.astype(np.float64) * 255), 0, 255)
     records["rotation"] = np.clip(np.rint(scene.quats.astype(np.float64) * 128 + 128), 0, 255)

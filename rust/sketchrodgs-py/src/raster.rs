@@ -24,9 +24,10 @@ fn raster_err(err: RasterError) -> PyErr {
 /// seconds and the visible and pair counts. `mode` is "all"; "index" (rgb and depth None); or
 /// "solid" (as "index", with alpha exact only below 0.5: `RenderMode::IndexSolid`).
 /// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
+/// `sh_rows` (N,) uint32: the row of `sh` (then (M, K, 3)) each Gaussian takes its SH from.
 /// `sort_offsets` (N, 3) float32: where each Gaussian sorts, from its mean in its own axes.
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sort_offsets = None))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sh_rows = None, sort_offsets = None))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -45,9 +46,10 @@ fn rasterize<'py>(
     background: (f32, f32, f32),
     mode: &str,
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
+    sh_rows: Option<&Bound<'py, PyArray1<u32>>>,
     sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
 ) -> PyResult<Rendered> {
-    let scene = SceneInput::new(means, scales, quats, opacities, sh, sort_offsets)?;
+    let scene = SceneInput::new(means, scales, quats, opacities, sh, sh_rows, sort_offsets)?;
     let splats = scene.splats()?;
     let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
     let options = options_of(background, mode)?;
@@ -76,6 +78,7 @@ struct SceneInput<'py> {
     quats: PyReadonlyArray2<'py, f32>,
     opacities: PyReadonlyArray1<'py, f32>,
     sh: PyReadonlyArray3<'py, f32>,
+    sh_rows: Option<PyReadonlyArray1<'py, u32>>,
     sort_offsets: Option<PyReadonlyArray2<'py, f32>>,
 }
 
@@ -86,6 +89,7 @@ impl<'py> SceneInput<'py> {
         quats: &Bound<'py, PyArray2<f32>>,
         opacities: &Bound<'py, PyArray1<f32>>,
         sh: &Bound<'py, PyArray3<f32>>,
+        sh_rows: Option<&Bound<'py, PyArray1<u32>>>,
         sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
     ) -> PyResult<Self> {
         let (means, scales, quats) = (means.try_readonly()?, scales.try_readonly()?, quats.try_readonly()?);
@@ -95,12 +99,16 @@ impl<'py> SceneInput<'py> {
         check_shape("scales", scales.shape(), &[Some(n), Some(3)])?;
         check_shape("quats", quats.shape(), &[Some(n), Some(4)])?;
         check_shape("opacities", opacities.shape(), &[Some(n)])?;
-        check_shape("sh", sh.shape(), &[Some(n), None, Some(3)])?;
+        let sh_rows = sh_rows.map(|r| r.try_readonly()).transpose()?;
+        if let Some(rows) = &sh_rows {
+            check_shape("sh_rows", rows.shape(), &[Some(n)])?;
+        }
+        check_shape("sh", sh.shape(), &[if sh_rows.is_some() { None } else { Some(n) }, None, Some(3)])?;
         let sort_offsets = sort_offsets.map(|o| o.try_readonly()).transpose()?;
         if let Some(offsets) = &sort_offsets {
             check_shape("sort_offsets", offsets.shape(), &[Some(n), Some(3)])?;
         }
-        Ok(Self { means, scales, quats, opacities, sh, sort_offsets })
+        Ok(Self { means, scales, quats, opacities, sh, sh_rows, sort_offsets })
     }
 
     fn splats(&self) -> PyResult<Splats<'_>> {
@@ -111,6 +119,7 @@ impl<'py> SceneInput<'py> {
             contiguous(&self.opacities, "opacities")?,
             contiguous(&self.sh, "sh")?,
             self.sh.shape()[1],
+            self.sh_rows.as_ref().map(|rows| contiguous(rows, "sh_rows")).transpose()?,
         )
         .map_err(raster_err)?;
         match &self.sort_offsets {
@@ -163,7 +172,7 @@ pub struct RetainedRender {
 #[pymethods]
 impl RetainedRender {
     #[new]
-    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sort_offsets = None))]
+    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sh_rows = None, sort_offsets = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -182,9 +191,10 @@ impl RetainedRender {
         moving: &Bound<'_, PyArray1<i64>>,
         background: (f32, f32, f32),
         mode: &str,
+        sh_rows: Option<&Bound<'_, PyArray1<u32>>>,
         sort_offsets: Option<&Bound<'_, PyArray2<f32>>>,
     ) -> PyResult<Self> {
-        let scene = SceneInput::new(means, scales, quats, opacities, sh, sort_offsets)?;
+        let scene = SceneInput::new(means, scales, quats, opacities, sh, sh_rows, sort_offsets)?;
         let splats = scene.splats()?;
         let n = splats.len();
         let moving = moving.try_readonly()?;

@@ -27,7 +27,10 @@
 //! let quats = [[1.0, 0.0, 0.0, 0.0]];
 //! let opacities = [0.9];
 //! let sh = [1.0, 0.0, -1.0]; // degree 0: one RGB coefficient per Gaussian
-//! let splats = Splats { means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: 1, sort_offsets: None };
+//! let splats = Splats {
+//!     means: &means, scales: &scales, quats: &quats, opacities: &opacities, sh: &sh, sh_coeffs: 1,
+//!     sh_rows: None, sort_offsets: None,
+//! };
 //! let out = rasterize(&splats, &camera, &RenderOptions::default()).unwrap();
 //! assert_eq!(out.index[24 * 64 + 32], 0); // the pixel under the mean sees Gaussian 0
 //! assert_eq!(out.index[0], -1);           // a corner sees nothing
@@ -87,6 +90,9 @@ pub enum RasterError {
     /// A buffer could not be allocated (the image, or the tile lists, would not fit in memory).
     #[error("the {what} needs {:.2} GB, more memory than can be had: render a smaller image", *bytes as f64 / 1e9)]
     OutOfMemory { what: &'static str, bytes: usize },
+    /// A Gaussian's SH row is not in the table.
+    #[error("sh_rows: Gaussian {index} takes SH row {row}, but sh has {rows} rows")]
+    ShRowOutOfRange { index: usize, row: u32, rows: usize },
     /// More Gaussians than a 32-bit index can name.
     #[error("too many Gaussians ({0}); at most {max} are supported", max = u32::MAX)]
     TooManyGaussians(usize),
@@ -115,9 +121,13 @@ pub struct Splats<'a> {
     /// (N) opacities in [0, 1].
     pub opacities: &'a [f32],
     /// (N * sh_coeffs * 3) SH coefficients laid out `[gaussian][coefficient][rgb]`; coefficient 0 is DC.
+    /// With `sh_rows`, a table of any number of such rows.
     pub sh: &'a [f32],
     /// Coefficients per channel K = (d+1)², d in 0..=3.
     pub sh_coeffs: usize,
+    /// (N) the row of `sh` each Gaussian takes its coefficients from, or None: row i. The pieces of
+    /// a split needle share their parent's row, so a split scene need not copy the SH of all.
+    pub sh_rows: Option<&'a [u32]>,
     /// (N) where each Gaussian sorts, from its mean in its own axes (turned by its rotation),
     /// or None: at the mean. The pieces of a split needle sort where their parent's centre is,
     /// so that at rest they composite as the parent did (docs/rendering.md, "Sort points").
@@ -125,7 +135,8 @@ pub struct Splats<'a> {
 }
 
 impl<'a> Splats<'a> {
-    /// Views flat row-major arrays (means and scales N*3, quats N*4, sh N*K*3) as [`Splats`].
+    /// Views flat row-major arrays (means and scales N*3, quats N*4, sh N*K*3, or M*K*3 rows that
+    /// `sh_rows` picks from) as [`Splats`].
     pub fn from_flat(
         means: &'a [f32],
         scales: &'a [f32],
@@ -133,6 +144,7 @@ impl<'a> Splats<'a> {
         opacities: &'a [f32],
         sh: &'a [f32],
         sh_coeffs: usize,
+        sh_rows: Option<&'a [u32]>,
     ) -> Result<Self, RasterError> {
         // The slices are f32-aligned and Vec3/[f32; 4] need no more, so only a length that is
         // not a whole number of rows can fail.
@@ -148,6 +160,7 @@ impl<'a> Splats<'a> {
             opacities,
             sh,
             sh_coeffs,
+            sh_rows,
             sort_offsets: None,
         };
         splats.validate()?;
@@ -184,16 +197,24 @@ impl<'a> Splats<'a> {
         if ![1, 4, 9, 16].contains(&self.sh_coeffs) {
             return Err(RasterError::UnsupportedShDegree(self.sh_coeffs));
         }
+        let row = self.sh_coeffs * 3;
+        let sh_rows = self.sh.len() / row;
         let lengths = [
             ("scales", self.scales.len(), n),
             ("quats", self.quats.len(), n),
             ("opacities", self.opacities.len(), n),
-            ("sh", self.sh.len(), n * self.sh_coeffs * 3),
+            ("sh", self.sh.len(), if self.sh_rows.is_some() { sh_rows * row } else { n * row }),
+            ("sh_rows", self.sh_rows.map_or(n, <[u32]>::len), n),
         ];
         for (name, got, expected) in lengths {
             if got != expected {
                 return Err(RasterError::LengthMismatch { name, expected, got });
             }
+        }
+        if let Some(rows) = self.sh_rows
+            && let Some(index) = rows.iter().position(|&r| r as usize >= sh_rows)
+        {
+            return Err(RasterError::ShRowOutOfRange { index, row: rows[index], rows: sh_rows });
         }
         if let Some(offsets) = self.sort_offsets
             && offsets.len() != n

@@ -68,7 +68,8 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
     let cam = CameraF32::new(camera);
     let k = splats.sh_coeffs;
     let one = |i: usize| {
-        let sh = if with_color { splats.sh.get(i * k * 3..(i + 1) * k * 3) } else { None };
+        let row = splats.sh_rows.map_or(i, |rows| rows[i] as usize);
+        let sh = if with_color { splats.sh.get(row * k * 3..(row + 1) * k * 3) } else { None };
         let sort_offset = splats.sort_offsets.map_or(Vec3::ZERO, |offsets| offsets[i]);
         project_one(
             splats.means[i],

@@ -93,8 +93,8 @@ impl Retained {
         let mut statics = statics;
         statics.rects = Vec::new(); // binned: only the splats are read from here on
         let k = splats.sh_coeffs;
-        let sh =
-            moving.iter().flat_map(|&r| &splats.sh[r as usize * k * 3..(r as usize + 1) * k * 3]).copied().collect();
+        let sh_row = |r: u32| splats.sh_rows.map_or(r as usize, |rows| rows[r as usize] as usize);
+        let sh = moving.iter().flat_map(|&r| &splats.sh[sh_row(r) * k * 3..(sh_row(r) + 1) * k * 3]).copied().collect();
         let opacities = moving.iter().map(|&r| splats.opacities[r as usize]).collect();
         let sort_offsets = splats.sort_offsets.map(|o| moving.iter().map(|&r| o[r as usize]).collect());
         let image = blank(camera, options)?;
@@ -253,7 +253,9 @@ mod tests {
         let scales: Vec<Vec3> = (0..n).map(|_| Vec3::new(0.002 + 0.05 * next(), 0.01, 0.002 + 0.05 * next())).collect();
         let quats: Vec<[f32; 4]> = (0..n).map(|_| [next() - 0.5, next() - 0.5, next() - 0.5, next() - 0.5]).collect();
         let opacities: Vec<f32> = (0..n).map(|_| next()).collect();
-        let sh: Vec<f32> = (0..n * k * 3).map(|_| next() - 0.5).collect();
+        // half as many SH rows as Gaussians, each row shared by two (as a split needle's pieces)
+        let sh: Vec<f32> = (0..n / 2 * k * 3).map(|_| next() - 0.5).collect();
+        let sh_rows: Vec<u32> = (0..n).map(|i| (i % (n / 2)) as u32).collect();
         // equal depths between a static and a moving Gaussian: the lower row goes first
         means[7] = means[8];
         // every third Gaussian sorts off its mean (as a split needle's pieces do), static and moving
@@ -279,6 +281,7 @@ mod tests {
                     opacities: &opacities,
                     sh: &sh,
                     sh_coeffs: k,
+                    sh_rows: Some(&sh_rows),
                     sort_offsets: Some(&sort_offsets),
                 };
                 rasterize(&splats, &camera, &options).unwrap()
@@ -290,6 +293,7 @@ mod tests {
                 opacities: &opacities,
                 sh: &sh,
                 sh_coeffs: k,
+                sh_rows: Some(&sh_rows),
                 sort_offsets: Some(&sort_offsets),
             };
             let mut retained = Retained::new(&first, &camera, &options, &moving).unwrap();

@@ -39,6 +39,7 @@ impl Scene {
             opacities: &self.opacities,
             sh: &self.sh,
             sh_coeffs: self.k,
+            sh_rows: None,
             sort_offsets: None,
         }
     }
@@ -225,6 +226,29 @@ fn a_sort_offset_moves_where_a_gaussian_sorts_and_only_that() {
 }
 
 #[test]
+fn sh_rows_render_as_the_rows_they_pick() {
+    // a table of 40 rows, 200 Gaussians picking from it: the same bits as each Gaussian given its
+    // own copy of its row
+    let scene = Scene::random(200, 9, 11);
+    let (k, table_rows) = (9, 40);
+    let rows: Vec<u32> = (0..200).map(|i| (i * 7 % table_rows) as u32).collect();
+    let table = &scene.sh[..table_rows * k * 3];
+    let copied: Vec<f32> =
+        rows.iter().flat_map(|&r| &table[r as usize * k * 3..(r as usize + 1) * k * 3]).copied().collect();
+    let cam = camera(64, 48);
+    let shared = Splats { sh: table, sh_rows: Some(&rows), ..scene.splats() };
+    let got = rasterize(&shared, &cam, &RenderOptions::default()).unwrap();
+    let want = rasterize(&Splats { sh: &copied, ..scene.splats() }, &cam, &RenderOptions::default()).unwrap();
+    assert_eq!((got.rgb, got.index), (want.rgb, want.index));
+    let mut bad = rows.clone();
+    bad[17] = table_rows as u32;
+    assert!(matches!(
+        rasterize(&Splats { sh_rows: Some(&bad), ..shared }, &cam, &RenderOptions::default()),
+        Err(RasterError::ShRowOutOfRange { index: 17, .. })
+    ));
+}
+
+#[test]
 fn tile_lists_hold_each_gaussian_in_its_rectangle_front_to_back() {
     let scene = Scene::random(3_000, 1, 4);
     let cam = camera(100, 70);
@@ -286,7 +310,7 @@ fn inconsistent_inputs_are_errors() {
     assert!(matches!(rasterize(&splats, &cam, &RenderOptions::default()), Err(RasterError::UnsupportedShDegree(5))));
     let flat: Vec<f32> = vec![0.0; 10];
     assert!(matches!(
-        Splats::from_flat(&flat, &flat, &flat, &flat, &flat, 1),
+        Splats::from_flat(&flat, &flat, &flat, &flat, &flat, 1, None),
         Err(RasterError::LengthMismatch { name: "means", .. })
     ));
     let mut bad = cam;
