@@ -112,9 +112,11 @@ def split(scene: GaussianScene, rows: np.ndarray, counts: np.ndarray) -> tuple[G
     """Split each of `rows` into `counts` pieces along its major axis.
 
     Returns:
-        the new scene (the input's rows, then the extra pieces), `source` (N',) int64 input row of
-        each new row, and `piece_rows` (P,) int64 the new rows that are pieces of split Gaussians
-        (the parents' own rows included).
+        the new scene (the input's rows, then the extra pieces; it shares the input's SH table,
+        each row taking its input row's coefficients (`sh_rows`), and each piece sorts at its
+        parent's centre (`sort_offsets`)), `source` (N',) int64 input row of each new row, and
+        `piece_rows` (P,) int64 the new rows that are pieces of split Gaussians (the parents' own
+        rows included).
     """
     n = len(scene)
     counts = np.asarray(counts, np.int64)
