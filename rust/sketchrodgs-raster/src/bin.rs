@@ -10,7 +10,7 @@
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::project::{MIN_GAUSSIANS_PER_TASK, Splat2D};
+use crate::project::{MIN_GAUSSIANS_PER_TASK, Projected};
 use crate::tiles::TileMask;
 use crate::tiles::TileRect;
 use crate::{RasterError, try_filled};
@@ -22,16 +22,14 @@ const GAUSSIANS_PER_CHUNK: usize = 16384;
 
 /// The visible (non-culled) Gaussians, front to back: sorted by camera z, ties by ascending
 /// index (the order the reference's stable key sort gives).
-pub fn sort_by_depth(splats: &[Splat2D], rects: &[TileRect]) -> Vec<u32> {
-    // z > NEAR_PLANE > 0, so the f32 bit pattern orders like the value. Keys are made in index
-    // order and the sort is stable, so equal depths stay in ascending index.
-    let mut keys: Vec<u64> = splats
-        .par_iter()
-        .zip(rects)
-        .enumerate()
+pub fn sort_by_depth(projected: &Projected) -> Vec<u32> {
+    // z > NEAR_PLANE > 0 (a sort point's z >= 0), so the f32 bit pattern orders like the value.
+    // Keys are made in index order and the sort is stable, so equal depths stay in ascending index.
+    let mut keys: Vec<u64> = (0..projected.rects.len())
+        .into_par_iter()
         .with_min_len(MIN_GAUSSIANS_PER_TASK)
-        .filter(|(_, (_, r))| !r.is_empty())
-        .map(|(i, (s, _))| (u64::from(s.sort_depth.to_bits()) << 32) | i as u64)
+        .filter(|&i| !projected.rects[i].is_empty())
+        .map(|i| (u64::from(projected.sort_key(i)) << 32) | i as u64)
         .collect();
     radix_sort_by_high_word(&mut keys);
     let mut order = Vec::new();

@@ -322,7 +322,7 @@ fn render(
     let start = Instant::now();
     let mut projected = project::project(splats, camera, with_color, tiles);
     let projected_at = Instant::now();
-    let order = bin::sort_by_depth(&projected.splats, &projected.rects);
+    let order = bin::sort_by_depth(&projected);
     // every non-empty rectangle is in `order`: sum in row order (sequential reads, parallel)
     let n_pairs: usize =
         projected.rects.par_iter().with_min_len(project::MIN_GAUSSIANS_PER_TASK).map(|r| r.area()).sum();

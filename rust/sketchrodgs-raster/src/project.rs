@@ -23,8 +23,6 @@ pub struct Splat2D {
     pub color: [f32; 3],
     /// Camera z of the centre.
     pub depth: f32,
-    /// Camera z it sorts by: of its sort point ([`Splats::sort_offsets`]), else `depth`.
-    pub sort_depth: f32,
     /// Below this `power`, `opacity * exp(power) < 1/255` for certain (with a 1e-3 margin for
     /// rounding), so compositing can skip a group of pixels without evaluating `exp`.
     pub power_floor: f32,
@@ -40,6 +38,9 @@ pub struct Projected {
     pub ids: Option<Vec<u32>>,
     pub splats: Vec<Splat2D>,
     pub rects: Vec<TileRect>,
+    /// Per entry, the camera z it sorts by where the splats have sort offsets (see [`sort_depth`]);
+    /// None: each sorts by its own depth. Kept apart from [`Splat2D`], which compositing reads.
+    pub sort_depths: Option<Vec<f32>>,
 }
 
 impl Projected {
@@ -52,7 +53,7 @@ impl Projected {
             splats.push(splat);
             rects.push(rect);
         }
-        Self { ids: Some(ids), splats, rects }
+        Self { ids: Some(ids), splats, rects, sort_depths: None }
     }
 
     /// The scene row of entry `k`.
@@ -60,6 +61,42 @@ impl Projected {
     pub fn id(&self, k: usize) -> u32 {
         self.ids.as_ref().map_or(k as u32, |ids| ids[k])
     }
+
+    /// The bits entry `k` sorts by (a positive float's bits order like its value).
+    #[inline]
+    pub fn sort_key(&self, k: usize) -> u32 {
+        self.sort_depths.as_ref().map_or(self.splats[k].depth, |d| d[k]).to_bits()
+    }
+
+    /// Sets the entries' sort depths from the Gaussians' `means` and `quats` (rows of the scene)
+    /// and `offset(row)`, their sort offsets.
+    pub(crate) fn sort_at(
+        &mut self,
+        means: &[Vec3],
+        quats: &[[f32; 4]],
+        offset: impl Fn(usize) -> Vec3 + Sync,
+        cam: &CameraF32,
+    ) {
+        let depths = (0..self.splats.len())
+            .into_par_iter()
+            .with_min_len(MIN_GAUSSIANS_PER_TASK)
+            .map(|k| {
+                let row = self.id(k) as usize;
+                sort_depth(means[row], quats[row], offset(row), cam)
+            })
+            .collect();
+        self.sort_depths = Some(depths);
+    }
+}
+
+/// The camera z a Gaussian sorts by: of its sort point `mean + R(quat) offset` (docs/rendering.md,
+/// "Sort points"). A zero offset gives its mean's z, the very bits [`project_one`] computes; a sort
+/// point behind the camera sorts first.
+#[inline]
+pub(crate) fn sort_depth(mean: Vec3, quat: [f32; 4], offset: Vec3, cam: &CameraF32) -> f32 {
+    let point = if offset == Vec3::ZERO { mean } else { mean + rotation(quat) * offset };
+    let z = (cam.rotation * point + cam.translation).z;
+    if z > 0.0 { z } else { 0.0 }
 }
 
 /// Projects every Gaussian, or with `tiles` only those whose footprint reaches a tile of it (the
@@ -70,17 +107,7 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
     let one = |i: usize| {
         let row = splats.sh_rows.map_or(i, |rows| rows[i] as usize);
         let sh = if with_color { splats.sh.get(row * k * 3..(row + 1) * k * 3) } else { None };
-        let sort_offset = splats.sort_offsets.map_or(Vec3::ZERO, |offsets| offsets[i]);
-        project_one(
-            splats.means[i],
-            splats.scales[i],
-            splats.quats[i],
-            splats.opacities[i],
-            sh,
-            sort_offset,
-            &cam,
-            camera,
-        )
+        project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, &cam, camera)
     };
     let Some(mask) = tiles else {
         let (mut projected, mut rects) = (Vec::new(), Vec::new());
@@ -89,7 +116,11 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
             .with_min_len(MIN_GAUSSIANS_PER_TASK)
             .map(|i| one(i).unwrap_or_default())
             .unzip_into_vecs(&mut projected, &mut rects);
-        return Projected { ids: None, splats: projected, rects };
+        let mut projected = Projected { ids: None, splats: projected, rects, sort_depths: None };
+        if let Some(offsets) = splats.sort_offsets {
+            projected.sort_at(splats.means, splats.quats, |row| offsets[row], &cam);
+        }
+        return projected;
     };
     let reach = Reach::new(mask, &cam);
     let found: Vec<(u32, Splat2D, TileRect)> = (0..splats.len())
@@ -116,7 +147,11 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
             kept
         })
         .collect();
-    Projected::from_found(found)
+    let mut projected = Projected::from_found(found);
+    if let Some(offsets) = splats.sort_offsets {
+        projected.sort_at(splats.means, splats.quats, |row| offsets[row], &cam);
+    }
+    projected
 }
 
 /// Projects every Gaussian (entry i is row i) and culls those whose `excluded` flag is set (the
@@ -213,16 +248,13 @@ fn tile_rect_of(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -
     }
 }
 
-/// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted; `sort_offset`
-/// (in its own axes) moves the point it sorts by off its mean.
-#[allow(clippy::too_many_arguments)]
+/// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted.
 pub(crate) fn project_one(
     mean: Vec3,
     scale: Vec3,
     quat: [f32; 4],
     opacity: f32,
     sh: Option<&[f32]>,
-    sort_offset: Vec3,
     cam: &CameraF32,
     camera: &Camera,
 ) -> Option<(Splat2D, TileRect)> {
@@ -243,8 +275,7 @@ pub(crate) fn project_one(
     let j0 = Vec3::new(cam.fx * inv_z, 0.0, -cam.fx * tx * inv_z * inv_z);
     let j1 = Vec3::new(0.0, cam.fy * inv_z, -cam.fy * ty * inv_z * inv_z);
     // Rows of T = J W; Σ2D = T R S Sᵀ Rᵀ Tᵀ = (T R S)(T R S)ᵀ.
-    let own = rotation(quat);
-    let rot_t = own.transpose() * cam.rotation.transpose();
+    let rot_t = rotation(quat).transpose() * cam.rotation.transpose();
     let m0 = scale * (rot_t * j0);
     let m1 = scale * (rot_t * j1);
     let a = m0.dot(m0) + LOW_PASS;
@@ -302,14 +333,7 @@ pub(crate) fn project_one(
         None => [0.0; 3],
     };
     let power_floor = -0.5 * tau - 1e-3;
-    // a sort point behind the camera sorts first (the key is a positive float's bits)
-    let sort_depth = if sort_offset == Vec3::ZERO {
-        z
-    } else {
-        let at = (cam.rotation * (mean + own * sort_offset) + cam.translation).z;
-        if at > 0.0 { at } else { 0.0 }
-    };
-    let splat = Splat2D { mean: mean2d, conic, opacity, color, depth: z, sort_depth, power_floor, pixel_box };
+    let splat = Splat2D { mean: mean2d, conic, opacity, color, depth: z, power_floor, pixel_box };
     Some((splat, rect))
 }
 

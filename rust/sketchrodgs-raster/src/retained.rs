@@ -82,7 +82,7 @@ impl Retained {
         moving.iter().for_each(|&r| is_moving[r as usize] = true);
         let with_color = options.mode == RenderMode::Full;
         let statics = project_static(splats, camera, with_color, &is_moving);
-        let order = sort_by_depth(&statics.splats, &statics.rects);
+        let order = sort_by_depth(&statics);
         let pairs: usize = order.iter().map(|&i| statics.rects[i as usize].area()).sum();
         if pairs > MAX_TILE_PAIRS {
             return Err(RasterError::TooManyTilePairs(pairs));
@@ -152,16 +152,20 @@ impl Retained {
             .filter_map(|(j, &r)| {
                 let r = r as usize;
                 let sh = if with_color { self.sh.get(j * k * 3..(j + 1) * k * 3) } else { None };
-                let sort_offset = self.sort_offsets.as_ref().map_or(Vec3::ZERO, |o: &Vec<Vec3>| o[j]);
-                project_one(means[r], scales[r], quats[r], self.opacities[j], sh, sort_offset, &cam, &self.camera)
+                project_one(means[r], scales[r], quats[r], self.opacities[j], sh, &cam, &self.camera)
                     .map(|(s, rect)| (r as u32, s, rect))
             })
             .collect();
-        let moving = Projected::from_found(found);
+        let mut moving = Projected::from_found(found);
+        if let Some(offsets) = &self.sort_offsets {
+            // self.moving is ascending: a row's position there is its offset's
+            let of_row = |row: usize| self.moving.binary_search(&(row as u32)).map_or(Vec3::ZERO, |j| offsets[j]);
+            moving.sort_at(means, quats, of_row, &cam);
+        }
         let projected_at = std::time::Instant::now();
         // the moving Gaussians front to back, ties by row (as a full render's sort)
         let mut order: Vec<u32> = (0..moving.splats.len() as u32).collect();
-        order.sort_by_key(|&i| (moving.splats[i as usize].sort_depth.to_bits(), moving.id(i as usize)));
+        order.sort_by_key(|&i| (moving.sort_key(i as usize), moving.id(i as usize)));
         let (grid_x, grid_y) = self.camera.tile_grid();
         let n_tiles = (grid_x * grid_y) as usize;
         let mut per_tile: Vec<Vec<u32>> = vec![Vec::new(); n_tiles];
@@ -211,7 +215,7 @@ fn merge<'a>(
     moving: &Projected,
     tile: &[u32],
 ) -> Vec<u32> {
-    let key = |p: &Projected, i: u32| (p.splats[i as usize].sort_depth.to_bits(), p.id(i as usize));
+    let key = |p: &Projected, i: u32| (p.sort_key(i as usize), p.id(i as usize));
     let mut out = Vec::with_capacity(tile.len());
     let mut m = tile.iter().peekable();
     for list in lists {

@@ -102,7 +102,7 @@ fn four_and_eight_lanes_blend_the_same_bits() {
     for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid] {
         let options = RenderOptions { background: [0.2, 0.1, 0.4], mode };
         let projected = project(&scene.splats(), &cam, mode == RenderMode::Full, None);
-        let order = sort_by_depth(&projected.splats, &projected.rects);
+        let order = sort_by_depth(&projected);
         let bins = TileBins::new(&cam, &projected.rects, &order, None).unwrap();
         let source = Binned { projected: &projected, bins: &bins };
         let mut outs = [Simd::Four, Simd::detect()].map(|simd| {
@@ -253,8 +253,8 @@ fn tile_lists_hold_each_gaussian_in_its_rectangle_front_to_back() {
     let scene = Scene::random(3_000, 1, 4);
     let cam = camera(100, 70);
     let projected = project(&scene.splats(), &cam, true, None);
+    let order = sort_by_depth(&projected);
     let (projected, rects) = (projected.splats, projected.rects);
-    let order = sort_by_depth(&projected, &rects);
     assert_eq!(order.len(), rects.iter().filter(|r| !r.is_empty()).count());
     let bins = TileBins::new(&cam, &rects, &order, None).unwrap();
     assert_eq!(bins.len(), rects.iter().map(|r| r.area()).sum::<usize>());
