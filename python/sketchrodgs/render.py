@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import TypedDict
 
 import numpy as np
 
@@ -122,14 +123,7 @@ def render(
         if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
             raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
         tiles = np.ascontiguousarray(tiles != 0)
-    raw = _core.rasterize(
-        *_core_inputs(scene, camera),
-        background=bg,
-        mode=mode,
-        tiles=tiles,
-        sh_rows=scene.sh_rows,
-        sort_offsets=scene.sort_offsets,
-    )
+    raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles, **_core_rows(scene))
     return RenderResult.from_core(raw, mode)
 
 
@@ -150,6 +144,16 @@ def _core_inputs(scene: GaussianScene, camera: Camera) -> _CoreInputs:
     w2c = np.ascontiguousarray(camera.world_to_camera, dtype=np.float64)
     return (scene.means, scene.scales, scene.quats, scene.opacities, scene.sh, w2c, camera.width, camera.height,
             camera.fx, camera.fy, camera.cx, camera.cy)  # fmt: skip
+
+
+class _CoreRows(TypedDict):
+    sh_rows: np.ndarray | None
+    sort_offsets: np.ndarray | None
+
+
+def _core_rows(scene: GaussianScene) -> _CoreRows:
+    """The scene's optional per-row arrays, as the core's renderers take them (by keyword)."""
+    return {"sh_rows": scene.sh_rows, "sort_offsets": scene.sort_offsets}
 
 
 TILE_SIZE = 16

@@ -178,6 +178,15 @@ impl<'a> Splats<'a> {
         Ok(Self { sort_offsets: Some(rows), ..self })
     }
 
+    /// The SH coefficients of Gaussian `i` (K*3 values), from its row of `sh` (see `sh_rows`);
+    /// None where the row is not in `sh` (splats that [`Splats::validate`] refuses).
+    #[inline]
+    pub fn sh_of(&self, i: usize) -> Option<&'a [f32]> {
+        let row = self.sh_rows.map_or(Some(i), |rows| rows.get(i).map(|&r| r as usize))?;
+        let k = self.sh_coeffs * 3;
+        self.sh.get(row * k..(row + 1) * k)
+    }
+
     /// Number of Gaussians.
     pub fn len(&self) -> usize {
         self.means.len()

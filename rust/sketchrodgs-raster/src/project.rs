@@ -103,26 +103,43 @@ pub(crate) fn sort_depth(mean: Vec3, quat: [f32; 4], offset: Vec3, cam: &CameraF
 /// others are dropped by a cheap bound on the footprint before the EWA projection).
 pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option<&TileMask>) -> Projected {
     let cam = CameraF32::new(camera);
-    let k = splats.sh_coeffs;
-    let one = |i: usize| {
-        let row = splats.sh_rows.map_or(i, |rows| rows[i] as usize);
-        let sh = if with_color { splats.sh.get(row * k * 3..(row + 1) * k * 3) } else { None };
-        project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, &cam, camera)
+    let mut projected = match tiles {
+        None => project_all(splats, &cam, camera, with_color),
+        Some(mask) => project_reaching(splats, &cam, camera, with_color, mask),
     };
-    let Some(mask) = tiles else {
-        let (mut projected, mut rects) = (Vec::new(), Vec::new());
-        (0..splats.len())
-            .into_par_iter()
-            .with_min_len(MIN_GAUSSIANS_PER_TASK)
-            .map(|i| one(i).unwrap_or_default())
-            .unzip_into_vecs(&mut projected, &mut rects);
-        let mut projected = Projected { ids: None, splats: projected, rects, sort_depths: None };
-        if let Some(offsets) = splats.sort_offsets {
-            projected.sort_at(splats.means, splats.quats, |row| offsets[row], &cam);
-        }
-        return projected;
-    };
-    let reach = Reach::new(mask, &cam);
+    if let Some(offsets) = splats.sort_offsets {
+        projected.sort_at(splats.means, splats.quats, |row| offsets[row], &cam);
+    }
+    projected
+}
+
+/// Row `i` of `splats` projected.
+#[inline]
+fn project_row(
+    splats: &Splats,
+    i: usize,
+    with_color: bool,
+    cam: &CameraF32,
+    camera: &Camera,
+) -> Option<(Splat2D, TileRect)> {
+    let sh = if with_color { splats.sh_of(i) } else { None };
+    project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, cam, camera)
+}
+
+/// Every row, entry i row i (a culled one an empty rectangle).
+fn project_all(splats: &Splats, cam: &CameraF32, camera: &Camera, with_color: bool) -> Projected {
+    let (mut projected, mut rects) = (Vec::new(), Vec::new());
+    (0..splats.len())
+        .into_par_iter()
+        .with_min_len(MIN_GAUSSIANS_PER_TASK)
+        .map(|i| project_row(splats, i, with_color, cam, camera).unwrap_or_default())
+        .unzip_into_vecs(&mut projected, &mut rects);
+    Projected { ids: None, splats: projected, rects, sort_depths: None }
+}
+
+/// The rows whose footprint reaches a tile of `mask`.
+fn project_reaching(splats: &Splats, cam: &CameraF32, camera: &Camera, with_color: bool, mask: &TileMask) -> Projected {
+    let reach = Reach::new(mask, cam);
     let found: Vec<(u32, Splat2D, TileRect)> = (0..splats.len())
         .into_par_iter()
         .step_by(MIN_GAUSSIANS_PER_TASK)
@@ -139,7 +156,8 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
                     &mut may,
                 );
                 for (i, _) in rows.zip(may).filter(|(_, m)| *m) {
-                    if let Some((splat, rect)) = one(i).filter(|(_, rect)| mask.touches(rect)) {
+                    let projected = project_row(splats, i, with_color, cam, camera);
+                    if let Some((splat, rect)) = projected.filter(|(_, rect)| mask.touches(rect)) {
                         kept.push((i as u32, splat, rect));
                     }
                 }
@@ -147,11 +165,7 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
             kept
         })
         .collect();
-    let mut projected = Projected::from_found(found);
-    if let Some(offsets) = splats.sort_offsets {
-        projected.sort_at(splats.means, splats.quats, |row| offsets[row], &cam);
-    }
-    projected
+    Projected::from_found(found)
 }
 
 /// Projects every Gaussian (entry i is row i) and culls those whose `excluded` flag is set (the

@@ -93,8 +93,7 @@ impl Retained {
         let mut statics = statics;
         statics.rects = Vec::new(); // binned: only the splats are read from here on
         let k = splats.sh_coeffs;
-        let sh_row = |r: u32| splats.sh_rows.map_or(r as usize, |rows| rows[r as usize] as usize);
-        let sh = moving.iter().flat_map(|&r| &splats.sh[sh_row(r) * k * 3..(sh_row(r) + 1) * k * 3]).copied().collect();
+        let sh = moving.iter().flat_map(|&r| splats.sh_of(r as usize).unwrap_or_default()).copied().collect();
         let opacities = moving.iter().map(|&r| splats.opacities[r as usize]).collect();
         let sort_offsets = splats.sort_offsets.map(|o| moving.iter().map(|&r| o[r as usize]).collect());
         let image = blank(camera, options)?;
