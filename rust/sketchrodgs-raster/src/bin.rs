@@ -42,33 +42,54 @@ pub fn sort_by_depth(projected: &Projected) -> Vec<u32> {
 const RADIX_BITS: u32 = 11;
 const RADIX: usize = 1 << RADIX_BITS;
 
+/// Keys per task of a radix pass (at least; fewer, longer chunks on very long inputs).
+const RADIX_CHUNK: usize = 1 << 18;
+/// Most chunks a radix pass splits the keys into (each keeps `RADIX` cursors and slices).
+const RADIX_MAX_CHUNKS: usize = 16;
+
 /// Stable LSD radix sort of `keys` by their upper 32 bits, `RADIX_BITS` a pass: keys with equal
 /// upper halves keep their input order. Passes where every key has the same digit are skipped.
+///
+/// Each pass runs on contiguous chunks in parallel: chunk c's keys of digit d go, in order, to
+/// their own slice of the output, after those of every smaller digit and of digit d in earlier
+/// chunks. That is the serial pass's placement, so the result does not depend on the chunking.
 fn radix_sort_by_high_word(keys: &mut Vec<u64>) {
     const PASSES: usize = 32_u32.div_ceil(RADIX_BITS) as usize;
     let digit = |k: u64, pass: usize| (k >> (32 + RADIX_BITS as usize * pass)) as usize & (RADIX - 1);
-    let mut counts = vec![[0u32; RADIX]; PASSES];
-    for &k in keys.iter() {
-        for (pass, count) in counts.iter_mut().enumerate() {
-            count[digit(k, pass)] += 1;
-        }
-    }
+    let chunk_len = RADIX_CHUNK.max(keys.len().div_ceil(RADIX_MAX_CHUNKS)).max(1);
+    let count = |keys: &[u64], pass: usize| -> Vec<Vec<usize>> {
+        keys.par_chunks(chunk_len)
+            .map(|chunk| {
+                let mut count = vec![0usize; RADIX];
+                chunk.iter().for_each(|&k| count[digit(k, pass)] += 1);
+                count
+            })
+            .collect()
+    };
     let mut scratch = vec![0u64; keys.len()];
-    for (pass, count) in counts.iter().enumerate() {
-        if count.iter().any(|&c| c as usize == keys.len()) {
+    for pass in 0..PASSES {
+        let counts = count(keys, pass);
+        if (0..RADIX).any(|d| counts.iter().map(|c| c[d]).sum::<usize>() == keys.len()) {
             continue;
         }
-        let mut next = [0u32; RADIX];
-        let mut total = 0;
-        for (slot, &c) in next.iter_mut().zip(count) {
-            *slot = total;
-            total += c;
+        // slots[c][d]: where chunk c puts its keys of digit d
+        let mut slots: Vec<Vec<&mut [u64]>> = counts.iter().map(|_| Vec::with_capacity(RADIX)).collect();
+        let mut rest = scratch.as_mut_slice();
+        for d in 0..RADIX {
+            for (chunk_slots, count) in slots.iter_mut().zip(&counts) {
+                let (slot, tail) = std::mem::take(&mut rest).split_at_mut(count[d]);
+                chunk_slots.push(slot);
+                rest = tail;
+            }
         }
-        for &k in keys.iter() {
-            let d = digit(k, pass);
-            scratch[next[d] as usize] = k;
-            next[d] += 1;
-        }
+        keys.par_chunks(chunk_len).zip(slots).for_each(|(chunk, mut slots)| {
+            let mut cursor = vec![0usize; RADIX];
+            for &k in chunk {
+                let d = digit(k, pass);
+                slots[d][cursor[d]] = k;
+                cursor[d] += 1;
+            }
+        });
         std::mem::swap(keys, &mut scratch);
     }
 }
@@ -175,7 +196,7 @@ mod tests {
     #[test]
     fn radix_sort_orders_by_depth_then_input_order() {
         let mut state = 7u64;
-        let mut keys: Vec<u64> = (0..20_000u64)
+        let mut keys: Vec<u64> = (0..600_000u64) // several chunks of a pass
             .map(|i| {
                 state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 // Few distinct depths, so ties are common; positive floats of all magnitudes.

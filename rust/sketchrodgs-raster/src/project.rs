@@ -5,6 +5,7 @@ use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, CameraF32};
+use crate::simd::Simd;
 use crate::tiles::{TileMask, TileRect};
 use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
 
@@ -12,7 +13,7 @@ use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
 pub(crate) const MIN_GAUSSIANS_PER_TASK: usize = 4096;
 
 /// What compositing needs of one projected Gaussian.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Zeroable)]
 pub struct Splat2D {
     /// Mean in INRIA pixel coordinates: `u - 0.5`, `v - 0.5` (pixel (i, j) is sampled at (i, j)).
     pub mean: [f32; 2],
@@ -90,7 +91,7 @@ impl Projected {
 }
 
 /// The camera z a Gaussian sorts by: of its sort point `mean + R(quat) offset` (docs/rendering.md,
-/// "Sort points"). A zero offset gives its mean's z, the very bits [`project_one`] computes; a sort
+/// "Sort points"). A zero offset gives its mean's z, the very bits [`project_each`] computes; a sort
 /// point behind the camera sorts first.
 #[inline]
 pub(crate) fn sort_depth(mean: Vec3, quat: [f32; 4], offset: Vec3, cam: &CameraF32) -> f32 {
@@ -113,27 +114,30 @@ pub fn project(splats: &Splats, camera: &Camera, with_color: bool, tiles: Option
     projected
 }
 
-/// Row `i` of `splats` projected.
-#[inline]
-fn project_row(
-    splats: &Splats,
-    i: usize,
-    with_color: bool,
-    cam: &CameraF32,
-    camera: &Camera,
-) -> Option<(Splat2D, TileRect)> {
+/// Row `i` of `splats` as input to [`project_each`].
+#[inline(always)]
+fn input<'a>(splats: &Splats<'a>, i: usize, with_color: bool) -> Input<'a> {
     let sh = if with_color { splats.sh_of(i) } else { None };
-    project_one(splats.means[i], splats.scales[i], splats.quats[i], splats.opacities[i], sh, cam, camera)
+    Input { mean: splats.means[i], scale: splats.scales[i], quat: splats.quats[i], opacity: splats.opacities[i], sh }
 }
 
 /// Every row, entry i row i (a culled one an empty rectangle).
 fn project_all(splats: &Splats, cam: &CameraF32, camera: &Camera, with_color: bool) -> Projected {
-    let (mut projected, mut rects) = (Vec::new(), Vec::new());
-    (0..splats.len())
-        .into_par_iter()
-        .with_min_len(MIN_GAUSSIANS_PER_TASK)
-        .map(|i| project_row(splats, i, with_color, cam, camera).unwrap_or_default())
-        .unzip_into_vecs(&mut projected, &mut rects);
+    let n = splats.len();
+    // zeroed pages from the system (the default of both): the parallel writers touch them first
+    let (mut projected, mut rects) = (bytemuck::zeroed_vec::<Splat2D>(n), bytemuck::zeroed_vec::<TileRect>(n));
+    projected
+        .par_chunks_mut(MIN_GAUSSIANS_PER_TASK)
+        .zip(rects.par_chunks_mut(MIN_GAUSSIANS_PER_TASK))
+        .enumerate()
+        .for_each(|(chunk, (projected, rects))| {
+            let start = chunk * MIN_GAUSSIANS_PER_TASK;
+            let row = |k: usize| input(splats, start + k, with_color);
+            project_each(projected.len(), row, cam, camera, |k, splat, rect| {
+                projected[k] = splat;
+                rects[k] = rect;
+            });
+        });
     Projected { ids: None, splats: projected, rects, sort_depths: None }
 }
 
@@ -145,7 +149,7 @@ fn project_reaching(splats: &Splats, cam: &CameraF32, camera: &Camera, with_colo
         .step_by(MIN_GAUSSIANS_PER_TASK)
         .flat_map_iter(|start| {
             let end = (start + MIN_GAUSSIANS_PER_TASK).min(splats.len());
-            let mut kept = Vec::new();
+            let mut candidates = Vec::new();
             let mut may = [false; REACH_BLOCK];
             for block in (start..end).step_by(REACH_BLOCK) {
                 let rows = block..(block + REACH_BLOCK).min(end);
@@ -155,13 +159,15 @@ fn project_reaching(splats: &Splats, cam: &CameraF32, camera: &Camera, with_colo
                     &splats.opacities[rows.clone()],
                     &mut may,
                 );
-                for (i, _) in rows.zip(may).filter(|(_, m)| *m) {
-                    let projected = project_row(splats, i, with_color, cam, camera);
-                    if let Some((splat, rect)) = projected.filter(|(_, rect)| mask.touches(rect)) {
-                        kept.push((i as u32, splat, rect));
-                    }
-                }
+                candidates.extend(rows.zip(may).filter(|(_, m)| *m).map(|(i, _)| i));
             }
+            let mut kept = Vec::new();
+            let row = |k: usize| input(splats, candidates[k], with_color);
+            project_each(candidates.len(), row, cam, camera, |k, splat, rect| {
+                if mask.touches(&rect) {
+                    kept.push((candidates[k] as u32, splat, rect));
+                }
+            });
             kept
         })
         .collect();
@@ -182,7 +188,7 @@ pub fn project_static(splats: &Splats, camera: &Camera, with_color: bool, exclud
 const REACH_BLOCK: usize = 8;
 
 /// Whether a Gaussian can reach the rendered tiles, from its centre and largest scale only: a
-/// bound on the footprint [`project_one`] gives. The EWA covariance is `T R S² Rᵀ Tᵀ + 0.3 I`
+/// bound on the footprint [`project_each`] gives. The EWA covariance is `T R S² Rᵀ Tᵀ + 0.3 I`
 /// (T the Jacobian rows), so its largest eigenvalue is at most `max(S)² |J|²_F + 0.3`, the
 /// radius's `max(., 0.1)` adds at most `sqrt(0.1)`, and `|J|²_F <= K / z²` with K from the
 /// Jacobian's clamp limits. A relative margin and two pixels cover rounding.
@@ -245,12 +251,6 @@ impl<'a> Reach<'a> {
 /// INRIA getRect: the tiles a footprint of `radius` px about (u, v) (INRIA pixel coordinates)
 /// overlaps; C truncation toward zero, then clamped to the grid.
 #[inline]
-fn tile_rect(u: f32, v: f32, radius: f32, camera: &Camera) -> TileRect {
-    let (grid_x, grid_y) = camera.tile_grid();
-    tile_rect_of(u, v, radius, (grid_x as usize, grid_y as usize))
-}
-
-#[inline]
 fn tile_rect_of(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -> TileRect {
     let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
     let trunc_clamp = |t: f32, max: usize| (t as i32).clamp(0, max as i32) as u16;
@@ -262,93 +262,227 @@ fn tile_rect_of(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -
     }
 }
 
-/// Projects one Gaussian; `sh` (K*3 values) is `None` when no colour is wanted.
-pub(crate) fn project_one(
-    mean: Vec3,
-    scale: Vec3,
-    quat: [f32; 4],
-    opacity: f32,
-    sh: Option<&[f32]>,
+/// One Gaussian's inputs to [`project_each`]; `sh` (K*3 values) is None when no colour is wanted.
+#[derive(Clone, Copy)]
+pub(crate) struct Input<'a> {
+    pub mean: Vec3,
+    pub scale: Vec3,
+    pub quat: [f32; 4],
+    pub opacity: f32,
+    pub sh: Option<&'a [f32]>,
+}
+
+/// Gaussians projected together: the geometry runs as straight-line code over arrays of this many
+/// lanes, which the compiler turns into SIMD (eight f32 lanes with AVX2). Every lane does the same
+/// IEEE operations in the same order whatever the width, so the bits never depend on it.
+const LANES: usize = 8;
+type Lanes = [f32; LANES];
+
+/// Projects the Gaussians `input(0..count)` and calls `emit(k, splat, rect)`, in order, for each
+/// one that reaches the image; compiled for AVX2 where the CPU has it.
+#[inline]
+pub(crate) fn project_each<'a>(
+    count: usize,
+    input: impl Fn(usize) -> Input<'a>,
     cam: &CameraF32,
     camera: &Camera,
-) -> Option<(Splat2D, TileRect)> {
-    // alpha = min(0.99, opacity * exp(power)) <= opacity: such a Gaussian is skipped everywhere.
-    if opacity.is_nan() || opacity < ALPHA_MIN {
-        return None;
-    }
-    let p = cam.rotation * mean + cam.translation;
-    if p.z.is_nan() || p.z <= NEAR_PLANE {
-        return None;
-    }
-    let (x, y, z) = (p.x, p.y, p.z);
-    let inv_z = 1.0 / z;
+    emit: impl FnMut(usize, Splat2D, TileRect),
+) {
+    project_each_with(Simd::detect(), count, input, cam, camera, emit);
+}
 
-    // EWA Jacobian at the mean, with x/z and y/z clamped (for J only) as the reference does.
-    let tx = z * (x * inv_z).clamp(-cam.lim_x_neg, cam.lim_x_pos);
-    let ty = z * (y * inv_z).clamp(-cam.lim_y_neg, cam.lim_y_pos);
-    let j0 = Vec3::new(cam.fx * inv_z, 0.0, -cam.fx * tx * inv_z * inv_z);
-    let j1 = Vec3::new(0.0, cam.fy * inv_z, -cam.fy * ty * inv_z * inv_z);
-    // Rows of T = J W; Σ2D = T R S Sᵀ Rᵀ Tᵀ = (T R S)(T R S)ᵀ.
-    let rot_t = rotation(quat).transpose() * cam.rotation.transpose();
-    let m0 = scale * (rot_t * j0);
-    let m1 = scale * (rot_t * j1);
-    let a = m0.dot(m0) + LOW_PASS;
-    let b = m0.dot(m1);
-    let c = m1.dot(m1) + LOW_PASS;
-    // det(G + εI) = |m0 × m1|² + ε tr(G) + ε², free of the cancellation in a·c - b².
-    let det = m0.cross(m1).length_squared() + LOW_PASS * (a + c - 2.0 * LOW_PASS) + LOW_PASS * LOW_PASS;
-    if !(det > 0.0 && det.is_finite()) {
-        return None;
+/// [`project_each`] compiled for `simd` (which the CPU must have: from `Simd::detect`).
+#[inline]
+fn project_each_with<'a>(
+    simd: Simd,
+    count: usize,
+    input: impl Fn(usize) -> Input<'a>,
+    cam: &CameraF32,
+    camera: &Camera,
+    emit: impl FnMut(usize, Splat2D, TileRect),
+) {
+    #[cfg(target_arch = "x86_64")]
+    if simd == Simd::Eight {
+        #[target_feature(enable = "avx2")]
+        fn run<'a>(
+            count: usize,
+            input: impl Fn(usize) -> Input<'a>,
+            cam: &CameraF32,
+            camera: &Camera,
+            emit: impl FnMut(usize, Splat2D, TileRect),
+        ) {
+            project_blocks(count, input, cam, camera, emit);
+        }
+        // SAFETY: `Simd::Eight` comes only from `Simd::detect`, which found AVX2 on this CPU.
+        unsafe { run(count, input, cam, camera, emit) };
+        return;
     }
-    let inv_det = 1.0 / det;
-    let conic = [c * inv_det, -b * inv_det, a * inv_det];
+    project_blocks(count, input, cam, camera, emit);
+}
 
-    let mid = 0.5 * (a + c);
-    let half_diff = 0.5 * (a - c);
-    let lambda1 = mid + (half_diff * half_diff + b * b).max(0.1).sqrt(); // mid² - det, exactly
-    let radius = ceil(SIGMA_EXTENT * lambda1.sqrt());
+#[inline(always)] // into `project_each`'s AVX2 copy too
+fn project_blocks<'a>(
+    count: usize,
+    input: impl Fn(usize) -> Input<'a>,
+    cam: &CameraF32,
+    camera: &Camera,
+    mut emit: impl FnMut(usize, Splat2D, TileRect),
+) {
+    for start in (0..count).step_by(LANES) {
+        let len = LANES.min(count - start);
+        // lanes past the end repeat the last Gaussian; their results are not emitted
+        let inputs: [Input; LANES] = std::array::from_fn(|l| input(start + l.min(len - 1)));
+        let found = project_block(&inputs, cam, camera);
+        for (l, (found, input)) in found.into_iter().zip(inputs).take(len).enumerate() {
+            if let Some((mut splat, rect)) = found {
+                if let Some(sh) = input.sh {
+                    splat.color = sh_to_color(sh, (input.mean - cam.center).normalize_or_zero());
+                }
+                emit(start + l, splat, rect);
+            }
+        }
+    }
+}
 
-    let u = cam.fx * x * inv_z + cam.cx;
-    let v = cam.fy * y * inv_z + cam.cy;
-    let mean2d = [u - 0.5, v - 0.5];
-    if !(mean2d[0].is_finite() && mean2d[1].is_finite() && radius.is_finite()) {
-        return None;
-    }
-    let mut rect = tile_rect(mean2d[0], mean2d[1], radius, camera);
-    if rect.is_empty() {
-        return None;
-    }
+/// The projection of `LANES` Gaussians without colour (INRIA `preprocessCUDA`); None for one
+/// that is culled or reaches no pixel. Every test is a lane mask, so the code has no branch.
+#[inline(always)]
+fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [Option<(Splat2D, TileRect)>; LANES] {
+    let field = |f: fn(&Input) -> f32| -> Lanes { std::array::from_fn(|l| f(&inputs[l])) };
+    let (mx, my, mz) = (field(|g| g.mean.x), field(|g| g.mean.y), field(|g| g.mean.z));
+    let (sx, sy, sz) = (field(|g| g.scale.x), field(|g| g.scale.y), field(|g| g.scale.z));
+    let (qw, qx, qy, qz) = (field(|g| g.quat[0]), field(|g| g.quat[1]), field(|g| g.quat[2]), field(|g| g.quat[3]));
+    let opacity = field(|g| g.opacity);
+    let (w, t) = (cam.rotation, cam.translation);
+    let (grid_x, grid_y) = camera.tile_grid();
+    let (width, height) = (camera.width, camera.height);
 
-    // Pixels where opacity * exp(-q/2) >= 1/255 satisfy q <= tau; on that ellipse |dx| reaches
-    // sqrt(tau Σxx). The margin keeps rounding from dropping a boundary pixel.
-    let tau = 2.0 * (opacity / ALPHA_MIN).ln();
-    let reach = |var: f32| (tau * var).sqrt() * (1.0 + 1e-3) + 0.05;
-    let (reach_x, reach_y) = (reach(a), reach(c));
-    // Inclusive pixel range [ceil(m - r), floor(m + r)] clipped to [0, side - 1].
-    let span = |m: f32, r: f32, side: u32| (ceil(m - r).max(0.0) as i32, floor(m + r).min((side - 1) as f32) as i32);
-    let (bx0, bx1) = span(mean2d[0], reach_x, camera.width);
-    let (by0, by1) = span(mean2d[1], reach_y, camera.height);
-    if bx0 > bx1 || by0 > by1 {
-        return None;
-    }
-    let pixel_box = [bx0 as u16, by0 as u16, bx1 as u16, by1 as u16];
-    // Tiles holding no pixel of the box would only skip this Gaussian: leave them out.
-    let tile = TILE_SIZE as u16;
-    rect.x0 = rect.x0.max(pixel_box[0] / tile);
-    rect.y0 = rect.y0.max(pixel_box[1] / tile);
-    rect.x1 = rect.x1.min(pixel_box[2] / tile + 1);
-    rect.y1 = rect.y1.min(pixel_box[3] / tile + 1);
-    if rect.is_empty() {
-        return None;
-    }
+    let mut valid = [false; LANES];
+    let (mut mean_u, mut mean_v, mut depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    let mut conic = [[0.0f32; LANES]; 3];
+    let mut power_floor = [0.0f32; LANES];
+    let mut pixel_box = [[0u16; LANES]; 4];
+    let mut rect = [[0u16; LANES]; 4];
+    for l in 0..LANES {
+        // View transform, in glam's order (so `sort_depth` of a zero offset gives the same z).
+        let x = w.x_axis.x * mx[l] + w.y_axis.x * my[l] + w.z_axis.x * mz[l] + t.x;
+        let y = w.x_axis.y * mx[l] + w.y_axis.y * my[l] + w.z_axis.y * mz[l] + t.y;
+        let z = w.x_axis.z * mx[l] + w.y_axis.z * my[l] + w.z_axis.z * mz[l] + t.z;
+        // alpha = min(0.99, opacity * exp(power)) <= opacity: below 1/255 it is skipped everywhere
+        let mut ok = opacity[l] >= ALPHA_MIN && z > NEAR_PLANE;
+        let inv_z = 1.0 / z;
 
-    let color = match sh {
-        Some(coeffs) => sh_to_color(coeffs, (mean - cam.center).normalize_or_zero()),
-        None => [0.0; 3],
-    };
-    let power_floor = -0.5 * tau - 1e-3;
-    let splat = Splat2D { mean: mean2d, conic, opacity, color, depth: z, power_floor, pixel_box };
-    Some((splat, rect))
+        // EWA Jacobian at the mean, with x/z and y/z clamped (for J only) as the reference does.
+        let tx = z * (x * inv_z).max(-cam.lim_x_neg).min(cam.lim_x_pos);
+        let ty = z * (y * inv_z).max(-cam.lim_y_neg).min(cam.lim_y_pos);
+        let (j0x, j0z) = (cam.fx * inv_z, -cam.fx * tx * inv_z * inv_z);
+        let (j1y, j1z) = (cam.fy * inv_z, -cam.fy * ty * inv_z * inv_z);
+        // Rows of T = J W in world axes: W^T j (W's rows are its matrix's columns' components).
+        let e0 = [
+            w.x_axis.x * j0x + w.x_axis.z * j0z,
+            w.y_axis.x * j0x + w.y_axis.z * j0z,
+            w.z_axis.x * j0x + w.z_axis.z * j0z,
+        ];
+        let e1 = [
+            w.x_axis.y * j1y + w.x_axis.z * j1z,
+            w.y_axis.y * j1y + w.y_axis.z * j1z,
+            w.z_axis.y * j1y + w.z_axis.z * j1z,
+        ];
+        // Rotation of the quaternion normalised by max(|q|, 1e-12), as the reference does.
+        let inv_norm = 1.0 / (qw[l] * qw[l] + qx[l] * qx[l] + qy[l] * qy[l] + qz[l] * qz[l]).sqrt().max(1e-12);
+        let (qw, qx, qy, qz) = (qw[l] * inv_norm, qx[l] * inv_norm, qy[l] * inv_norm, qz[l] * inv_norm);
+        let r = [
+            [1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy)],
+            [2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx)],
+            [2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy)],
+        ];
+        // Σ2D = T R S Sᵀ Rᵀ Tᵀ = M Mᵀ with the rows of M = (T R) S.
+        let scale = [sx[l], sy[l], sz[l]];
+        let row = |e: [f32; 3]| -> [f32; 3] {
+            std::array::from_fn(|j| (e[0] * r[0][j] + e[1] * r[1][j] + e[2] * r[2][j]) * scale[j])
+        };
+        let (m0, m1) = (row(e0), row(e1));
+        let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let a = dot(m0, m0) + LOW_PASS;
+        let b = dot(m0, m1);
+        let c = dot(m1, m1) + LOW_PASS;
+        // det(G + εI) = |m0 × m1|² + ε tr(G) + ε², free of the cancellation in a·c - b².
+        let cross = [m0[1] * m1[2] - m0[2] * m1[1], m0[2] * m1[0] - m0[0] * m1[2], m0[0] * m1[1] - m0[1] * m1[0]];
+        let det = dot(cross, cross) + LOW_PASS * (a + c - 2.0 * LOW_PASS) + LOW_PASS * LOW_PASS;
+        ok &= det > 0.0 && det <= f32::MAX;
+        let inv_det = 1.0 / det;
+        conic[0][l] = c * inv_det;
+        conic[1][l] = -b * inv_det;
+        conic[2][l] = a * inv_det;
+
+        let mid = 0.5 * (a + c);
+        let half_diff = 0.5 * (a - c);
+        let lambda1 = mid + (half_diff * half_diff + b * b).max(0.1).sqrt(); // mid² - det, exactly
+        let radius = ceil(SIGMA_EXTENT * lambda1.sqrt());
+        let u = cam.fx * x * inv_z + cam.cx - 0.5;
+        let v = cam.fy * y * inv_z + cam.cy - 0.5;
+        ok &= u.abs() <= f32::MAX && v.abs() <= f32::MAX && radius <= f32::MAX;
+        let tiles = tile_rect_of(u, v, radius, (grid_x as usize, grid_y as usize));
+
+        // Pixels where opacity * exp(-q/2) >= 1/255 satisfy q <= tau; on that ellipse |dx| reaches
+        // sqrt(tau Σxx). The margin keeps rounding from dropping a boundary pixel.
+        let tau = 2.0 * ln_at_least_one(opacity[l] / ALPHA_MIN);
+        let reach = |var: f32| (tau * var).sqrt() * (1.0 + 1e-3) + 0.05;
+        // Inclusive pixel range [ceil(m - r), floor(m + r)] clipped to [0, side - 1].
+        let span =
+            |m: f32, r: f32, side: u32| (ceil(m - r).max(0.0) as i32, floor(m + r).min((side - 1) as f32) as i32);
+        let (bx0, bx1) = span(u, reach(a), width);
+        let (by0, by1) = span(v, reach(c), height);
+        ok &= bx0 <= bx1 && by0 <= by1;
+        let pixels = [bx0.max(0) as u16, by0.max(0) as u16, bx1.max(0) as u16, by1.max(0) as u16];
+        // Tiles holding no pixel of the box would only skip this Gaussian: leave them out.
+        let tile = TILE_SIZE as u16;
+        let clipped = [
+            tiles.x0.max(pixels[0] / tile),
+            tiles.y0.max(pixels[1] / tile),
+            tiles.x1.min(pixels[2] / tile + 1),
+            tiles.y1.min(pixels[3] / tile + 1),
+        ];
+        ok &= clipped[0] < clipped[2] && clipped[1] < clipped[3];
+
+        valid[l] = ok;
+        (mean_u[l], mean_v[l], depth[l]) = (u, v, z);
+        power_floor[l] = -0.5 * tau - 1e-3;
+        for k in 0..4 {
+            pixel_box[k][l] = pixels[k];
+            rect[k][l] = clipped[k];
+        }
+    }
+    std::array::from_fn(|l| {
+        valid[l].then(|| {
+            let splat = Splat2D {
+                mean: [mean_u[l], mean_v[l]],
+                conic: [conic[0][l], conic[1][l], conic[2][l]],
+                opacity: opacity[l],
+                color: [0.0; 3],
+                depth: depth[l],
+                power_floor: power_floor[l],
+                pixel_box: [pixel_box[0][l], pixel_box[1][l], pixel_box[2][l], pixel_box[3][l]],
+            };
+            let [x0, y0, x1, y1] = [rect[0][l], rect[1][l], rect[2][l], rect[3][l]];
+            (splat, TileRect { x0, y0, x1, y1 })
+        })
+    })
+}
+
+/// `ln(x)` for `1 <= x <= 255` (what `tau` needs), in lane-friendly arithmetic: `x = 2^e m` with
+/// `m` in [0.75, 1.5), and `ln m = 2 atanh(f)`, `f = (m - 1) / (m + 1)`, by its odd series to f¹¹
+/// (|f| <= 0.2, so the error is below 1e-9 relative to ln 2). Other inputs give a finite value.
+#[inline(always)]
+fn ln_at_least_one(x: f32) -> f32 {
+    let bits = x.to_bits();
+    // the exponent of x / 0.75, so that m = x / 2^e lands in [0.75, 1.5)
+    let e = ((bits.wrapping_add(0x0040_0000) >> 23) & 0xff) as i32 - 127;
+    let m = f32::from_bits(bits.wrapping_sub((e as u32) << 23));
+    let f = (m - 1.0) / (m + 1.0);
+    let f2 = f * f;
+    let series = 1.0 + f2 * (1.0 / 3.0 + f2 * (1.0 / 5.0 + f2 * (1.0 / 7.0 + f2 * (1.0 / 9.0 + f2 * (1.0 / 11.0)))));
+    e as f32 * std::f32::consts::LN_2 + 2.0 * f * series
 }
 
 /// Pixel coordinates are clamped to ±this before rounding: far beyond any image, and small
@@ -446,6 +580,63 @@ mod tests {
         // Unnormalised input is normalised; a zero quaternion is the identity.
         assert!((rotation([2.0, 0.0, 0.0, 0.0]) - Mat3::IDENTITY).abs_diff_eq(Mat3::ZERO, 1e-6));
         assert!((rotation([0.0; 4]) - Mat3::IDENTITY).abs_diff_eq(Mat3::ZERO, 1e-6));
+    }
+
+    #[test]
+    fn ln_matches_the_library_over_the_opacity_range() {
+        for i in 0..=100_000 {
+            let x = 1.0 + 254.0 * i as f32 / 100_000.0;
+            let (ours, libm) = (ln_at_least_one(x), x.ln());
+            assert!((ours - libm).abs() <= 2e-7 * libm.max(1.0), "ln({x}): {ours} vs {libm}");
+        }
+    }
+
+    #[test]
+    fn lanes_give_the_same_bits_at_every_width_and_cull_what_the_reference_culls() {
+        let mut state = 99u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let camera = Camera {
+            width: 96,
+            height: 64,
+            fx: 80.0,
+            fy: 80.0,
+            cx: 48.0,
+            cy: 32.0,
+            world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+        };
+        // some behind the camera, off the image, nearly transparent, or NaN
+        let inputs: Vec<Input> = (0..1001)
+            .map(|i| Input {
+                mean: Vec3::new(next() * 4.0 - 2.0, next() * 3.0 - 1.5, next() * 6.0 - 1.0),
+                scale: Vec3::new(next(), next(), next()) * 0.1,
+                quat: [next() - 0.5, next() - 0.5, next() - 0.5, next() - 0.5],
+                opacity: if i % 97 == 0 { f32::NAN } else { next() * 0.5 },
+                sh: None,
+            })
+            .collect();
+        let cam = CameraF32::new(&camera);
+        let run = |simd: Simd| {
+            let mut found = Vec::new();
+            project_each_with(simd, inputs.len(), |k| inputs[k], &cam, &camera, |k, s, r| found.push((k, s, r)));
+            found
+        };
+        let four = run(Simd::Four);
+        assert_eq!(four, run(Simd::detect()));
+        let kept: Vec<usize> = four.iter().map(|f| f.0).collect();
+        for (k, g) in inputs.iter().enumerate() {
+            let z = g.mean.z; // the identity camera
+            let expected = g.opacity >= ALPHA_MIN && z > NEAR_PLANE;
+            if !expected {
+                assert!(!kept.contains(&k), "Gaussian {k} should be culled");
+            }
+        }
+        assert!(kept.len() > 300, "{} kept", kept.len());
+        for (_, splat, rect) in &four {
+            assert!(!rect.is_empty() && splat.conic.iter().all(|c| c.is_finite()));
+        }
     }
 
     #[test]

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use crate::bin::{TileBins, sort_by_depth};
 use crate::camera::{Camera, CameraF32};
 use crate::composite::{Source, blank, composite_into};
-use crate::project::{Projected, Splat2D, project_one, project_static};
+use crate::project::{Input, Projected, Splat2D, project_each, project_static};
 use crate::tiles::TileMask;
 use crate::tiles::TileRect;
 use crate::{MAX_TILE_PAIRS, RasterError, RenderMode, RenderOptions, RenderOutput, Splats};
@@ -141,18 +141,21 @@ impl Retained {
         }
         let start = std::time::Instant::now();
         let cam = CameraF32::new(&self.camera);
-        let k = self.sh_coeffs;
+        let k_sh = self.sh_coeffs;
         let with_color = self.options.mode == RenderMode::Full;
         let found: Vec<(u32, Splat2D, TileRect)> = self
             .moving
-            .par_iter()
+            .par_chunks(1024)
             .enumerate()
-            .with_min_len(1024)
-            .filter_map(|(j, &r)| {
-                let r = r as usize;
-                let sh = if with_color { self.sh.get(j * k * 3..(j + 1) * k * 3) } else { None };
-                project_one(means[r], scales[r], quats[r], self.opacities[j], sh, &cam, &self.camera)
-                    .map(|(s, rect)| (r as u32, s, rect))
+            .flat_map_iter(|(chunk, rows)| {
+                let input = |k: usize| {
+                    let (j, r) = (chunk * 1024 + k, rows[k] as usize);
+                    let sh = if with_color { self.sh.get(j * k_sh * 3..(j + 1) * k_sh * 3) } else { None };
+                    Input { mean: means[r], scale: scales[r], quat: quats[r], opacity: self.opacities[j], sh }
+                };
+                let mut kept = Vec::with_capacity(rows.len());
+                project_each(rows.len(), input, &cam, &self.camera, |k, splat, rect| kept.push((rows[k], splat, rect)));
+                kept
             })
             .collect();
         let mut moving = Projected::from_found(found);

@@ -8,7 +8,7 @@ use crate::{RasterError, TILE_SIZE};
 
 /// Half-open tile range `[x0, x1) x [y0, y1)` a Gaussian is binned into; empty for a culled
 /// Gaussian. (At most 1024 tiles a side, see `MAX_IMAGE_SIDE`.)
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Zeroable)]
 pub struct TileRect {
     pub x0: u16,
     pub y0: u16,
