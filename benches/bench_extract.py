@@ -109,6 +109,7 @@ def real_cases() -> None:
                 f"{s.radius_low:.2f}-{s.radius_high:.2f}",
                 f"{s.radius_spread:.2f}",
                 f"{s.jaccard:.2f}",
+                f"{s.end_gap:.2f}",
                 "all" if not misses else f"{len(misses)} missed",
                 f"{time.perf_counter() - start:.1f}",
             ]
@@ -117,7 +118,8 @@ def real_cases() -> None:
     print_table(
         f"real captures: {len(cases)} parts, distances in R (targets: views <= {t['cross_mean']} / {t['cross_max']}, "
         f"reversed <= {t['reverse_max']}, jitter <= {t['jitter_mean']} / {t['jitter_max']}, radius "
-        f"{t['radius_low']}-{t['radius_high']} x R, spread <= {t['radius_spread']}); {met} meet every target",
+        f"{t['radius_low']}-{t['radius_high']} x R, spread <= {t['radius_spread']}, rod ends <= {t['end_gap']} short "
+        f"of the path's); {met} meet every target",
         [
             "case",
             "views",
@@ -130,6 +132,7 @@ def real_cases() -> None:
             "R est. / R",
             "R spread",
             "Jaccard",
+            "end short",
             "targets",
             "s",
         ],

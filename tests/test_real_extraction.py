@@ -93,6 +93,13 @@ def test_at_most_3_percent_of_jittered_strokes_fail(scored):
     assert failures <= TARGETS["jitter_fail_share"] * count, f"{failures} of {count} jittered strokes failed"
 
 
+def test_rods_reach_the_ends_of_their_paths(scored):
+    """The rod covers what the stroke found: a rod cut short would pass the measures below, which
+    compare rods only where they overlap."""
+    for name, (_, score) in scored.items():
+        assert score.end_gap <= TARGETS["end_gap"], (name, score.end_gap)
+
+
 def test_the_reversed_stroke_gives_the_same_rod(scored):
     for name, (_, score) in scored.items():
         assert score.reverse_max <= TARGETS["reverse_max"], (name, score.reverse_max)

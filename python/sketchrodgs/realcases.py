@@ -38,6 +38,9 @@ TARGETS = {
     "radius_high": 1.4,
     "radius_spread": 1.5,
     "jitter_fail_share": 0.03,
+    # ours, not the issue's: the measures above compare rods only where they overlap, so a rod
+    # cut short would meet them; each end of the rod stays this close to where its path ends
+    "end_gap": 3.0,
 }
 
 
@@ -86,6 +89,7 @@ class CaseScore:
     radius_high: float
     radius_spread: float
     jaccard: float
+    end_gap: float
 
     def misses(self) -> list[str]:
         """The targets this case does not meet, as readable strings (empty: all met)."""
@@ -110,6 +114,7 @@ class CaseScore:
                 t["radius_low"] <= self.radius_low and self.radius_high <= t["radius_high"],
             ),
             (f"radius spread {self.radius_spread:.2f}", self.radius_spread <= t["radius_spread"]),
+            (f"rod end {self.end_gap:.2f} R short of its path's", self.end_gap <= t["end_gap"]),
         ]
         return [what for what, ok in checks if not ok]
 
@@ -184,4 +189,15 @@ def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
         radius_high=max(radii) / radius if radii else np.nan,
         radius_spread=max(radii) / min(radii) if radii else np.nan,
         jaccard=min(jaccards) if jaccards else np.nan,
+        end_gap=max((end_gap(v.given) for v in views if v.given is not None), default=np.nan),
     )
+
+
+def end_gap(extraction: Extraction) -> float:
+    """How far the rod stops short of its path, in units of R: the larger, over both ends of the
+    pixel path, of the on-screen distance from that end to the projected polyline, with R taken
+    on screen at the polyline's median depth."""
+    uv, depth = extraction.camera.project(np.asarray(extraction.polyline, np.float64))
+    path = np.concatenate([np.asarray(piece, np.float64) for piece in extraction.pixel_path])
+    radius_px = extraction.radius * extraction.camera.fx / float(np.median(depth))
+    return max(float(np.min(np.linalg.norm(uv - end, axis=1))) / radius_px for end in (path[0], path[-1]))
