@@ -617,6 +617,15 @@ mod tests {
                 sh: None,
             })
             .collect();
+        // and some with a NaN or infinite field: culled, like the reference's checks cull them
+        let mut inputs = inputs;
+        let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+        for (i, value) in bad.iter().enumerate() {
+            inputs[10 * i + 1].mean.x = *value;
+            inputs[10 * i + 2].scale.y = *value;
+            inputs[10 * i + 3].quat[2] = *value;
+            inputs[10 * i + 4].mean.z = *value;
+        }
         let cam = CameraF32::new(&camera);
         let run = |simd: Simd| {
             let mut found = Vec::new();
@@ -636,6 +645,11 @@ mod tests {
         assert!(kept.len() > 300, "{} kept", kept.len());
         for (_, splat, rect) in &four {
             assert!(!rect.is_empty() && splat.conic.iter().all(|c| c.is_finite()));
+        }
+        for i in 0..bad.len() {
+            for k in 1..=4 {
+                assert!(!kept.contains(&(10 * i + k)), "Gaussian {} with a non-finite field kept", 10 * i + k);
+            }
         }
     }
 
