@@ -405,6 +405,21 @@ def test_render_is_deterministic_across_runs_and_thread_counts():
         assert out.stdout.strip() == digest, f"{threads} threads gave a different image"
 
 
+def test_renders_after_a_larger_scene_or_a_release_are_the_same():
+    # a render keeps its buffers for the next (docs/rendering.md, "Buffers kept between renders")
+    from sketchrodgs.render import release_buffers
+
+    small, cam = random_scene(2_000, seed=5), camera()
+    first = render(small, cam)
+    render(plant_scene(), cam)  # larger: its buffers are kept, and the small scene reuses them
+    after_larger = render(small, cam)
+    release_buffers()
+    after_release = render(small, cam)
+    for name in ("rgb", "alpha", "depth", "index", "index_depth"):
+        np.testing.assert_array_equal(getattr(after_larger, name), getattr(first, name))
+        np.testing.assert_array_equal(getattr(after_release, name), getattr(first, name))
+
+
 def test_an_image_larger_than_memory_is_an_error_not_an_abort():
     # under a 4 GB address-space limit, a 16384x16384 render (7.5 GB of outputs) must raise
     code = (

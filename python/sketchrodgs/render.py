@@ -127,6 +127,13 @@ def render(
     return RenderResult.from_core(raw, mode)
 
 
+def release_buffers() -> None:
+    """Free the buffers a full render keeps for the next one (docs/rendering.md, "Buffers kept
+    between renders"): about 76 bytes per Gaussian of the largest scene rendered, held so that
+    repeated renders skip the system's page faults. The next render allocates afresh."""
+    _core.release_render_buffers()
+
+
 def _check_inputs(scene: GaussianScene, camera: Camera) -> None:
     if not isinstance(scene, GaussianScene):
         raise SketchRodGSError(f"scene: expected a GaussianScene, got {type(scene).__name__}")

@@ -278,8 +278,15 @@ fn into_rendered(py: Python<'_>, out: RenderOutput) -> PyResult<Rendered> {
     })
 }
 
+/// Frees the buffers renders keep for the next one (see `sketchrodgs.render.release_buffers`).
+#[pyfunction]
+fn release_render_buffers() {
+    sketchrodgs_raster::release_kept_buffers();
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(release_render_buffers, m)?)?;
     m.add_class::<RetainedRender>()?;
     m.add_class::<Rendered>()?;
     Ok(())

@@ -10,6 +10,7 @@
 use rayon::prelude::*;
 
 use crate::camera::Camera;
+use crate::kept;
 use crate::project::{MIN_GAUSSIANS_PER_TASK, Projected};
 use crate::tiles::TileMask;
 use crate::tiles::TileRect;
@@ -25,17 +26,27 @@ const GAUSSIANS_PER_CHUNK: usize = 16384;
 pub fn sort_by_depth(projected: &Projected) -> Vec<u32> {
     // z > NEAR_PLANE > 0 (a sort point's z >= 0), so the f32 bit pattern orders like the value.
     // Keys are made in index order and the sort is stable, so equal depths stay in ascending index.
-    let mut keys: Vec<u64> = (0..projected.rects.len())
+    // A culled entry gets the key CULLED, above every depth's: it sorts last and is cut off.
+    let mut keys = kept::SORT_KEYS.take();
+    (0..projected.rects.len())
         .into_par_iter()
         .with_min_len(MIN_GAUSSIANS_PER_TASK)
-        .filter(|&i| !projected.rects[i].is_empty())
-        .map(|i| (u64::from(projected.sort_key(i)) << 32) | i as u64)
-        .collect();
+        .map(
+            |i| {
+                if projected.rects[i].is_empty() { CULLED } else { (u64::from(projected.sort_key(i)) << 32) | i as u64 }
+            },
+        )
+        .collect_into_vec(&mut keys);
     radix_sort_by_high_word(&mut keys);
+    let visible = keys.partition_point(|&k| k != CULLED);
     let mut order = Vec::new();
-    keys.par_iter().with_min_len(MIN_GAUSSIANS_PER_TASK).map(|k| *k as u32).collect_into_vec(&mut order);
+    keys[..visible].par_iter().with_min_len(MIN_GAUSSIANS_PER_TASK).map(|k| *k as u32).collect_into_vec(&mut order);
+    kept::SORT_KEYS.give_back(keys);
     order
 }
+
+/// The sort key of a culled entry: its depth bits are a NaN's, above those of any depth.
+const CULLED: u64 = u64::MAX;
 
 /// Bits of the key sorted per radix pass: three passes cover the 32-bit depth, and a pass's
 /// counters (8 KiB) stay in L1.
@@ -66,7 +77,7 @@ fn radix_sort_by_high_word(keys: &mut Vec<u64>) {
             })
             .collect()
     };
-    let mut scratch = vec![0u64; keys.len()];
+    let mut scratch = kept::with_len(kept::SORT_SCRATCH.take(), keys.len());
     for pass in 0..PASSES {
         let counts = count(keys, pass);
         if (0..RADIX).any(|d| counts.iter().map(|c| c[d]).sum::<usize>() == keys.len()) {
@@ -92,6 +103,7 @@ fn radix_sort_by_high_word(keys: &mut Vec<u64>) {
         });
         std::mem::swap(keys, &mut scratch);
     }
+    kept::SORT_SCRATCH.give_back(scratch);
 }
 
 /// The per-tile lists of Gaussian indices, front to back.

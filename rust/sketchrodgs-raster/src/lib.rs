@@ -44,6 +44,7 @@ use rayon::prelude::*;
 pub mod bin;
 pub mod camera;
 pub mod composite;
+mod kept;
 pub mod project;
 pub mod retained;
 mod simd;
@@ -52,6 +53,7 @@ mod tests;
 pub mod tiles;
 
 pub use camera::{Camera, MAX_IMAGE_SIDE};
+pub use kept::release_kept_buffers;
 pub use retained::Retained;
 pub use tiles::TileMask;
 
@@ -329,7 +331,7 @@ fn render(
     let with_color = options.mode == RenderMode::Full;
 
     let start = Instant::now();
-    let mut projected = project::project(splats, camera, with_color, tiles);
+    let projected = project::project(splats, camera, with_color, tiles);
     let projected_at = Instant::now();
     let order = bin::sort_by_depth(&projected);
     // every non-empty rectangle is in `order`: sum in row order (sequential reads, parallel)
@@ -339,11 +341,11 @@ fn render(
         return Err(RasterError::TooManyTilePairs(n_pairs));
     }
     let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles)?;
-    projected.rects = Vec::new(); // compositing needs only the splats
     let sorted_at = Instant::now();
     let mut out =
         composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles)?;
     let end = Instant::now();
+    projected.give_back();
 
     out.n_visible = order.len();
     out.n_tile_pairs = bins.len();

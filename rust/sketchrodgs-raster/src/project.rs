@@ -5,6 +5,7 @@ use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::{Camera, CameraF32};
+use crate::kept;
 use crate::simd::Simd;
 use crate::tiles::{TileMask, TileRect};
 use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
@@ -55,6 +56,12 @@ impl Projected {
             rects.push(rect);
         }
         Self { ids: Some(ids), splats, rects, sort_depths: None }
+    }
+
+    /// Gives its buffers back to be kept for the next render (see `kept`).
+    pub(crate) fn give_back(self) {
+        crate::kept::SPLATS.give_back(self.splats);
+        crate::kept::RECTS.give_back(self.rects);
     }
 
     /// The scene row of entry `k`.
@@ -124,13 +131,17 @@ fn input<'a>(splats: &Splats<'a>, i: usize, with_color: bool) -> Input<'a> {
 /// Every row, entry i row i (a culled one an empty rectangle).
 fn project_all(splats: &Splats, cam: &CameraF32, camera: &Camera, with_color: bool) -> Projected {
     let n = splats.len();
-    // zeroed pages from the system (the default of both): the parallel writers touch them first
-    let (mut projected, mut rects) = (bytemuck::zeroed_vec::<Splat2D>(n), bytemuck::zeroed_vec::<TileRect>(n));
+    // the last render's buffers, or zeroed pages from the system that the writers touch first
+    let mut projected = kept::with_len(kept::SPLATS.take(), n);
+    let mut rects = kept::with_len(kept::RECTS.take(), n);
     projected
         .par_chunks_mut(MIN_GAUSSIANS_PER_TASK)
         .zip(rects.par_chunks_mut(MIN_GAUSSIANS_PER_TASK))
         .enumerate()
         .for_each(|(chunk, (projected, rects))| {
+            // a culled Gaussian keeps the default (whatever a last render left there is cleared)
+            projected.fill(Splat2D::default());
+            rects.fill(TileRect::default());
             let start = chunk * MIN_GAUSSIANS_PER_TASK;
             let row = |k: usize| input(splats, start + k, with_color);
             project_each(projected.len(), row, cam, camera, |k, splat, rect| {

@@ -381,3 +381,26 @@ fn rendering_some_tiles_gives_exactly_the_full_render_there() {
         Err(RasterError::LengthMismatch { name: "tiles", .. })
     ));
 }
+
+#[test]
+fn renders_after_a_larger_one_reuse_its_buffers_and_match_a_fresh_render() {
+    // A render keeps its projection and sort buffers for the next (`kept`). What the larger
+    // render left there must not show through: the later scene is smaller, and most of it is
+    // behind the camera (culled rows where the first scene's were visible).
+    let cam = camera(64, 48);
+    let big = Scene::random(30_000, 4, 21);
+    let mut small = Scene::random(9_000, 4, 22);
+    for mean in small.means.iter_mut().step_by(3).skip(1) {
+        mean.z = -mean.z;
+    }
+    let fresh = {
+        release_kept_buffers();
+        render(&small, &cam)
+    };
+    for _ in 0..2 {
+        let _ = render(&big, &cam);
+        let again = render(&small, &cam);
+        assert_eq!((&again.rgb, &again.index, &again.alpha), (&fresh.rgb, &fresh.index, &fresh.alpha));
+        assert_eq!(again.n_visible, fresh.n_visible);
+    }
+}
