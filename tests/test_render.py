@@ -17,7 +17,7 @@ import sketchrodgs
 from conftest import DATA, PLANT, random_scene
 from reference.raster_reference import render_reference
 from sketchrodgs import Camera, CameraError, GaussianScene, SketchRodGSError, _core
-from sketchrodgs.render import render
+from sketchrodgs.render import release_buffers, render
 
 SH_C0 = 0.28209479177387814
 ALPHA_MIN = 1.0 / 255.0
@@ -407,8 +407,6 @@ def test_render_is_deterministic_across_runs_and_thread_counts():
 
 def test_renders_after_a_larger_scene_or_a_release_are_the_same():
     # a render keeps its buffers for the next (docs/rendering.md, "Buffers kept between renders")
-    from sketchrodgs.render import release_buffers
-
     small, cam = random_scene(2_000, seed=5), camera()
     first = render(small, cam)
     render(plant_scene(), cam)  # larger: its buffers are kept, and the small scene reuses them
