@@ -26,9 +26,11 @@ impl<T> Kept<T> {
         self.0.try_lock().map(|mut kept| std::mem::take(&mut *kept)).unwrap_or_default()
     }
 
-    /// Keeps `buffer` for the next render, unless a larger one is kept already.
+    /// Keeps `buffer` for the next render, unless a larger one is kept already. Never waits: a
+    /// buffer that finds the lock taken is dropped (and a process forked while another thread held
+    /// the lock cannot hang here).
     pub(crate) fn give_back(&self, buffer: Vec<T>) {
-        if let Ok(mut kept) = self.0.lock()
+        if let Ok(mut kept) = self.0.try_lock()
             && buffer.capacity() > kept.capacity()
         {
             *kept = buffer;
@@ -36,7 +38,7 @@ impl<T> Kept<T> {
     }
 
     fn release(&self) {
-        if let Ok(mut kept) = self.0.lock() {
+        if let Ok(mut kept) = self.0.try_lock() {
             *kept = Vec::new();
         }
     }
