@@ -172,14 +172,14 @@ fn project_reaching(splats: &Splats, cam: &CameraF32, camera: &Camera, with_colo
                 );
                 candidates.extend(rows.zip(may).filter(|(_, m)| *m).map(|(i, _)| i));
             }
-            let mut kept = Vec::new();
+            let mut found = Vec::new();
             let row = |k: usize| input(splats, candidates[k], with_color);
             project_each(candidates.len(), row, cam, camera, |k, splat, rect| {
                 if mask.touches(&rect) {
-                    kept.push((candidates[k] as u32, splat, rect));
+                    found.push((candidates[k] as u32, splat, rect));
                 }
             });
-            kept
+            found
         })
         .collect();
     Projected::from_found(found)
@@ -399,19 +399,10 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
             w.y_axis.y * j1y + w.y_axis.z * j1z,
             w.z_axis.y * j1y + w.z_axis.z * j1z,
         ];
-        // Rotation of the quaternion normalised by max(|q|, 1e-12), as the reference does.
-        let inv_norm = 1.0 / (qw[l] * qw[l] + qx[l] * qx[l] + qy[l] * qy[l] + qz[l] * qz[l]).sqrt().max(1e-12);
-        let (qw, qx, qy, qz) = (qw[l] * inv_norm, qx[l] * inv_norm, qy[l] * inv_norm, qz[l] * inv_norm);
-        let r = [
-            [1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy)],
-            [2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx)],
-            [2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy)],
-        ];
+        let r = rotation([qw[l], qx[l], qy[l], qz[l]]);
         // Σ2D = T R S Sᵀ Rᵀ Tᵀ = M Mᵀ with the rows of M = (T R) S.
         let scale = [sx[l], sy[l], sz[l]];
-        let row = |e: [f32; 3]| -> [f32; 3] {
-            std::array::from_fn(|j| (e[0] * r[0][j] + e[1] * r[1][j] + e[2] * r[2][j]) * scale[j])
-        };
+        let row = |e: [f32; 3]| -> [f32; 3] { std::array::from_fn(|j| r.col(j).dot(Vec3::from(e)) * scale[j]) };
         let (m0, m1) = (row(e0), row(e1));
         let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let a = dot(m0, m0) + LOW_PASS;

@@ -62,6 +62,9 @@ impl Source for Merged<'_> {
     }
 }
 
+/// Moving Gaussians projected per rayon task each frame.
+const MOVING_PER_TASK: usize = 1024;
+
 impl Retained {
     /// Renders `splats` once, keeping the projection and tile lists of every Gaussian not in
     /// `moving` (scene rows).
@@ -145,17 +148,19 @@ impl Retained {
         let with_color = self.options.mode == RenderMode::Full;
         let found: Vec<(u32, Splat2D, TileRect)> = self
             .moving
-            .par_chunks(1024)
+            .par_chunks(MOVING_PER_TASK)
             .enumerate()
             .flat_map_iter(|(chunk, rows)| {
                 let input = |k: usize| {
-                    let (j, r) = (chunk * 1024 + k, rows[k] as usize);
+                    let (j, r) = (chunk * MOVING_PER_TASK + k, rows[k] as usize);
                     let sh = if with_color { self.sh.get(j * k_sh * 3..(j + 1) * k_sh * 3) } else { None };
                     Input { mean: means[r], scale: scales[r], quat: quats[r], opacity: self.opacities[j], sh }
                 };
-                let mut kept = Vec::with_capacity(rows.len());
-                project_each(rows.len(), input, &cam, &self.camera, |k, splat, rect| kept.push((rows[k], splat, rect)));
-                kept
+                let mut found = Vec::with_capacity(rows.len());
+                project_each(rows.len(), input, &cam, &self.camera, |k, splat, rect| {
+                    found.push((rows[k], splat, rect))
+                });
+                found
             })
             .collect();
         let mut moving = Projected::from_found(found);
