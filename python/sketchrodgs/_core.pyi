@@ -31,12 +31,15 @@ def trace_stroke(
     alpha: npt.NDArray[np.float32] | None = None,
     rendered: npt.NDArray[np.bool_] | None = None,
     missed: npt.NDArray[np.bool_] | None = None,
+    behind: tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]] | None = None,
 ) -> Trace: ...
 
 @final
 class TracePiece:
     @property
     def pixels(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def pixel_ids(self) -> npt.NDArray[np.uint32]: ...
     @property
     def gaussian_ids(self) -> npt.NDArray[np.uint32]: ...
     @property
@@ -54,6 +57,8 @@ class Trace:
     def clean_stroke(self) -> npt.NDArray[np.float32]: ...
     @property
     def coverage(self) -> float: ...
+    @property
+    def wants_behind(self) -> bool: ...
 
 def estimate_radius(
     index: npt.NDArray[np.int32],
@@ -64,6 +69,7 @@ def estimate_radius(
     band_px: float = 0.0,
     rendered: npt.NDArray[np.bool_] | None = None,
     missed: npt.NDArray[np.bool_] | None = None,
+    behind: tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]] | None = None,
 ) -> float: ...
 def nearest_on_polyline(
     polyline: npt.NDArray[np.float32], points: npt.NDArray[np.float32], reach: float
@@ -125,6 +131,26 @@ def rasterize(
     sh_rows: npt.NDArray[np.uint32] | None = None,
     sort_offsets: npt.NDArray[np.float32] | None = None,
 ) -> Rendered: ...
+def rasterize_behind(
+    means: npt.NDArray[np.float32],
+    scales: npt.NDArray[np.float32],
+    quats: npt.NDArray[np.float32],
+    opacities: npt.NDArray[np.float32],
+    sh: npt.NDArray[np.float32],
+    world_to_camera: npt.NDArray[np.float64],
+    width: int,
+    height: int,
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    near: npt.NDArray[np.float32],
+    count: int,
+    gap_px: float,
+    tiles: npt.NDArray[np.bool_] | None = None,
+    sh_rows: npt.NDArray[np.uint32] | None = None,
+    sort_offsets: npt.NDArray[np.float32] | None = None,
+) -> list[Rendered]: ...
 
 @final
 class Rendered:

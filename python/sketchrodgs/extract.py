@@ -21,7 +21,7 @@ from .atomic import atomic_open, atomic_write_text
 from .camera import Camera
 from .errors import PathNotFoundError, SketchRodGSError
 from .jsonfile import read_json
-from .partial_render import MARGIN_PX, PartialRender, band_tiles
+from .partial_render import BEHIND_LAYERS, MARGIN_PX, PartialRender, band_tiles
 from .render import RenderResult
 from .rod import MAX_ROD_VERTICES
 from .scene import GaussianScene
@@ -307,31 +307,40 @@ def extract_rod(
     ):
         raise SketchRodGSError(f"smoothing: must be a number of radii in 0..{MAX_SMOOTHING:g}, got {smoothing!r}")
 
-    partial = None
-    if render is None:
-        band = band_px if band_px is not None else 0.01 * camera.width
-        partial = PartialRender(scene, camera, band_tiles(camera, stroke, band + MARGIN_PX))
-        render = partial.result
-        timings["render"] = time.perf_counter() - clock
-    if render.index.shape != (camera.height, camera.width):
+    if render is not None and render.index.shape != (camera.height, camera.width):
         raise SketchRodGSError(f"render: index image is {render.index.shape}, camera is {camera.height}x{camera.width}")
+    given = render is not None
+    # The band's tiles (unless the render was given), and where the search asks for them, the
+    # layers behind them.
+    band = band_px if band_px is not None else 0.01 * camera.width
+    partial = PartialRender(
+        scene, camera, None if given else band_tiles(camera, stroke, band + MARGIN_PX), front=render
+    )
+    render_s = time.perf_counter() - clock
+    layered = False
     while True:
-        # With a partial render the search records what it read outside it; those tiles are then
-        # rendered and the search runs again (partial_render.py).
-        missed = partial.missed() if partial is not None else None
+        # The search records what it read outside the rendered tiles; those tiles are then
+        # rendered and the search runs again (partial_render.py). A search that could run behind
+        # what lies in front of the object asks for the layers behind; it then runs again with them.
+        missed = partial.missed()
         try:
             radius_found, estimated, trace, pixel_path, path_ids, points = _trace(
-                scene, camera, render, stroke, radius, alpha, band_px, timings, partial, missed
+                scene, camera, partial, stroke, radius, alpha, band_px, timings, missed
             )
         except PathNotFoundError:
-            if missed is None or not missed.any():
+            if not missed.any():
                 raise
-        if partial is None or missed is None or not missed.any():
-            break
         clock = time.perf_counter()
-        partial.add(missed)
-        render = partial.result
-        timings["render"] += time.perf_counter() - clock
+        if missed.any():
+            partial.add(missed)
+        elif trace.wants_behind and not layered:
+            partial.add_behind(BEHIND_LAYERS, band_tiles(camera, stroke, band + MARGIN_PX))
+            layered = True
+        else:
+            break
+        render_s += time.perf_counter() - clock
+    if partial.renders:
+        timings["render"] = render_s
     radius = radius_found
     flip = _flipped(stroke)
     pieces = trace.pieces
@@ -380,7 +389,7 @@ def extract_rod(
         stroke=stroke,
         radius_estimated=estimated,
         timings=timings,
-        rendered_tiles=float(partial.tiles.mean()) if partial is not None else None,
+        rendered_tiles=None if given else float(partial.tiles.mean()),
         scene_identity=SceneIdentity.of(scene),
     )
 
@@ -388,21 +397,20 @@ def extract_rod(
 def _trace(
     scene: GaussianScene,
     camera: Camera,
-    render: RenderResult,
+    partial: PartialRender,
     stroke: np.ndarray,
     radius: float | None,
     alpha: float,
     band_px: float | None,
     timings: dict[str, float],
-    partial: PartialRender | None,
-    missed: np.ndarray | None,
+    missed: np.ndarray,
 ) -> tuple:
     """Everything that reads the render: R (estimated when None), the path, its Gaussians in order
     and their centres lightly smoothed. Returns (radius, estimated, trace, pixel_path (user's
     direction), path_ids, points)."""
-    index, depth, opacity, work, flip = _search_inputs(render, stroke)
+    index, depth, opacity, work, flip = _search_inputs(partial.result, stroke)
     focal = float(camera.fx)
-    region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed} if partial is not None else {}
+    region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed, "behind": partial.behind_arrays()}
     clock = time.perf_counter()
     estimated = radius is None
     if radius is None:
@@ -432,7 +440,7 @@ def _trace(
         pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        path_ids = _near_their_pixels(trace.pieces, index, scene.means, camera, radius)
+        path_ids = _near_their_pixels(trace.pieces, scene.means, camera, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
         # the zigzag before the chain is resampled by arc length.
         points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
@@ -449,15 +457,13 @@ def _trace(
     return radius, estimated, trace, pixel_path, path_ids, points
 
 
-def _near_their_pixels(
-    pieces: list[_core.TracePiece], index: np.ndarray, means: np.ndarray, camera: Camera, radius: float
-) -> np.ndarray:
+def _near_their_pixels(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
     projects far from the pixel where the path met them: a big Gaussian of what the part touches
     (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's
     edge while its centre lies far away, and would hook the rod's end towards it."""
     pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
-    ids = index[pixels[:, 1], pixels[:, 0]].astype(np.int64)
+    ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     _, first = np.unique(ids, return_index=True)
     first = np.sort(first)  # first visit of each Gaussian, in path order
     ids, pixels = ids[first], pixels[first]

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
-from .render import SOLID_OUTPUTS, TILE_SIZE, RenderResult, render, tile_grid
+from .errors import SketchRodGSError
+from .render import SOLID_OUTPUTS, TILE_SIZE, RenderResult, render, render_behind, tile_grid
 from .scene import GaussianScene
 
 # Tiles are taken within the band plus this many pixels of the stroke: the search smooths the
@@ -20,6 +21,10 @@ from .scene import GaussianScene
 # Every later render makes one more pass over the whole scene, which at capture size costs more
 # than these tiles: with 64 px, 28 % of real strokes need no second render (1 % with 16 px).
 MARGIN_PX = 64.0
+# Layers rendered behind the front (docs/extraction.md, "What lies behind"): a stem behind two
+# leaves is the third layer; each layer lies this many pixels' world size behind the last.
+BEHIND_LAYERS = 3
+GAP_PX = 24.0
 
 
 def band_tiles(camera: Camera, stroke: np.ndarray, reach_px: float) -> np.ndarray:
@@ -28,56 +33,108 @@ def band_tiles(camera: Camera, stroke: np.ndarray, reach_px: float) -> np.ndarra
     y, x = np.mgrid[0:rows, 0:cols]
     centres = np.stack([(x.ravel() + 0.5) * TILE_SIZE, (y.ravel() + 0.5) * TILE_SIZE], axis=1)
     points = np.asarray(stroke, np.float64)
+    a, b = (points[:-1], points[1:]) if len(points) > 1 else (points, points)
+    ab = b - a
+    length2 = np.maximum((ab * ab).sum(axis=1), 1e-12)
     nearest = np.full(len(centres), np.inf)
-    for a, b in zip(points[:-1], points[1:]) if len(points) > 1 else [(points[0], points[0])]:
-        ab = b - a
-        t = np.clip((centres - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
-        nearest = np.minimum(nearest, np.linalg.norm(centres - (a + t[:, None] * ab), axis=1))
+    for start in range(0, len(a), 64):  # segments in blocks: (tiles x 64) at a time
+        rel = centres[:, None, :] - a[None, start : start + 64]
+        t = np.clip((rel * ab[None, start : start + 64]).sum(axis=2) / length2[start : start + 64], 0.0, 1.0)
+        gap = rel - t[..., None] * ab[None, start : start + 64]
+        nearest = np.minimum(nearest, np.sqrt((gap * gap).sum(axis=2)).min(axis=1))
     # a tile's pixels lie within half a diagonal of its centre
     return (nearest <= reach_px + TILE_SIZE / np.sqrt(2)).reshape(rows, cols)
 
 
 class PartialRender:
-    """Render of K, Z and solid (`outputs=SOLID_OUTPUTS`) of some tiles of `camera`'s image, grown on
-    demand.
+    """Render of K, Z and solid (`outputs=SOLID_OUTPUTS`) of some tiles of `camera`'s image, and
+    on demand of the depth layers behind them (`render_behind`), grown on demand.
 
     Attributes:
-        tiles: (rows, cols) bool, the tiles rendered so far.
-        result: the render (background, index -1, outside `tiles`).
+        tiles: (rows, cols) bool, the tiles where `result` and `behind` are rendered (with a front
+            given and no layers behind yet, every tile).
+        result: the render (background, index -1, outside `tiles`); the `front` given, if one was.
+        behind: the layers behind `result`, front to back (index -1 outside `tiles`); none until
+            `add_behind`.
         renders: how many renders it took.
     """
 
-    def __init__(self, scene: GaussianScene, camera: Camera, tiles: np.ndarray):
-        self.scene, self.camera = scene, camera
-        self.tiles = np.ascontiguousarray(tiles, bool)
-        self.result = render(scene, camera, outputs=SOLID_OUTPUTS, tiles=self.tiles)
-        self.renders = 1
+    def __init__(
+        self, scene: GaussianScene, camera: Camera, tiles: np.ndarray | None, front: RenderResult | None = None
+    ):
+        """Render `tiles`, or take the `front` given (then `tiles` may be None)."""
+        self.scene, self.camera, self.front = scene, camera, front
+        self.behind: list[RenderResult] = []
+        if front is not None:
+            self.tiles = np.ones(tile_grid(camera), bool)
+            self.result, self.renders = front, 0
+        else:
+            if tiles is None:
+                raise SketchRodGSError("PartialRender: give the tiles to render, or the front")
+            self.tiles = np.ascontiguousarray(tiles, bool)
+            self.result, self.renders = render(scene, camera, outputs=SOLID_OUTPUTS, tiles=self.tiles), 1
+
+    def add_behind(self, count: int, tiles: np.ndarray) -> None:
+        """Render `count` layers behind the front (each `GAP_PX` pixels' world size behind the
+        last) of the rendered tiles among `tiles`; with a front given, of `tiles`, which then become
+        the rendered tiles."""
+        if self.front is not None:
+            self.tiles = np.ascontiguousarray(tiles, bool)
+        self.behind = self._behind(self.result, count, self.tiles)
+        self.renders += 1
+
+    def _behind(self, front: RenderResult, count: int, tiles: np.ndarray) -> list[RenderResult]:
+        step = np.float32(1.0 + GAP_PX / self.camera.fx)
+        near = np.where(front.index >= 0, front.index_depth * step, np.float32(np.inf)).astype(np.float32)
+        return render_behind(self.scene, self.camera, near, count, gap_px=GAP_PX, tiles=tiles)
 
     def missed(self) -> np.ndarray:
         """A fresh (rows, cols) record for the search to mark the tiles it read but we lack."""
         return np.zeros_like(self.tiles)
 
     def add(self, missed: np.ndarray) -> None:
-        """Render the tiles of `missed` and merge them into `result`. A width walk that leaves the
-        rendered tiles walks on to its end, so `missed` holds all it can read; only where the
-        search then goes elsewhere (1 of 117 real strokes) does it ask again."""
+        """Render the tiles of `missed` and merge them into `result` (unless it was given) and
+        `behind`. A width walk that leaves the rendered tiles walks on to its end, so `missed` holds
+        all it can read; only where the search then goes elsewhere (1 of 117 real strokes) does it
+        ask again."""
         new = missed & ~self.tiles
         if not new.any():
             return
-        part = render(self.scene, self.camera, outputs=SOLID_OUTPUTS, tiles=new)
         pixels = np.kron(new, np.ones((TILE_SIZE, TILE_SIZE), bool))[: self.camera.height, : self.camera.width]
-        merged = {name: getattr(self.result, name).copy() for name in ("index", "index_depth", "solid")}
-        for name, image in merged.items():
-            image[pixels] = getattr(part, name)[pixels]
+        if self.front is None:
+            self.result = _merged(
+                self.result, render(self.scene, self.camera, outputs=SOLID_OUTPUTS, tiles=new), pixels
+            )
+        if self.behind:
+            parts = self._behind(self.result, len(self.behind), new)
+            self.behind = [_merged(old, part, pixels) for old, part in zip(self.behind, parts)]
         self.tiles |= new
         self.renders += 1
-        self.result = RenderResult(
-            rgb=None,
-            depth=None,
-            alpha=None,
-            index=merged["index"],
-            index_depth=merged["index_depth"],
-            solid=merged["solid"],
-            n_visible=self.result.n_visible + part.n_visible,
-            n_tile_pairs=self.result.n_tile_pairs + part.n_tile_pairs,
-        )
+
+    def behind_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The layers behind as the path search takes them: index (L, H, W) int32, index depth
+        and solid (1 or 0) float32; None without layers."""
+        if not self.behind:
+            return None
+        index = np.stack([layer.index for layer in self.behind]).astype(np.int32, copy=False)
+        depth = np.stack([layer.index_depth for layer in self.behind]).astype(np.float32, copy=False)
+        solid = np.stack([layer.is_solid() for layer in self.behind]).astype(np.float32)
+        return index, depth, solid
+
+
+def _merged(old: RenderResult, part: RenderResult, pixels: np.ndarray) -> RenderResult:
+    """`old` with `part`'s K, Z and solid at `pixels`."""
+    merged = {name: getattr(old, name).copy() for name in ("index", "index_depth")}
+    merged["solid"] = old.is_solid().copy()
+    for name, image in merged.items():
+        image[pixels] = (part.is_solid() if name == "solid" else getattr(part, name))[pixels]
+    return RenderResult(
+        rgb=None,
+        depth=None,
+        alpha=None,
+        index=merged["index"],
+        index_depth=merged["index_depth"],
+        solid=merged["solid"],
+        n_visible=old.n_visible + part.n_visible,
+        n_tile_pairs=old.n_tile_pairs + part.n_tile_pairs,
+    )

@@ -118,13 +118,50 @@ def render(
     _check_inputs(scene, camera)
     bg = _background(background)
     mode = render_mode(outputs)
-    if tiles is not None:
-        tiles = np.asarray(tiles)
-        if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
-            raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
-        tiles = np.ascontiguousarray(tiles != 0)
+    tiles = _check_tiles(tiles, camera)
     raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles, **_core_rows(scene))
     return RenderResult.from_core(raw, mode)
+
+
+def render_behind(
+    scene: GaussianScene,
+    camera: Camera,
+    near: np.ndarray,
+    count: int,
+    *,
+    gap_px: float = 8.0,
+    tiles: np.ndarray | None = None,
+) -> list[RenderResult]:
+    """Depth layers of what lies behind `near`, as `render(..., outputs=SOLID_OUTPUTS)` gives
+    them (docs/extraction.md, "What lies behind").
+
+    Layer 0 blends at each pixel only the Gaussians deeper than `near` there ((H, W) camera z;
+    -inf: all, inf: none); each further layer only those deeper than the last layer's index depth
+    plus `gap_px` pixels' world size at that depth. `tiles` as for `render`. The Gaussians are
+    projected and sorted once for all `count` layers.
+    """
+    _check_inputs(scene, camera)
+    near = np.asarray(near)
+    if near.shape != (camera.height, camera.width) or near.dtype.kind != "f" or np.isnan(near).any():
+        raise SketchRodGSError(
+            f"near: expected a ({camera.height}, {camera.width}) array of depths, got {near.dtype} {near.shape}"
+        )
+    if not (isinstance(count, (int, np.integer)) and 0 <= count <= 64):
+        raise SketchRodGSError(f"count: expected a whole number of layers in 0..64, got {count!r}")
+    tiles = _check_tiles(tiles, camera)
+    raws = _core.rasterize_behind(*_core_inputs(scene, camera), np.ascontiguousarray(near, np.float32), int(count),
+                                  float(gap_px), tiles=tiles, **_core_rows(scene))  # fmt: skip
+    return [RenderResult.from_core(raw, "solid") for raw in raws]
+
+
+def _check_tiles(tiles: np.ndarray | None, camera: Camera) -> np.ndarray | None:
+    """`tiles` as the core takes it: a C-contiguous bool array of the camera's tile grid."""
+    if tiles is None:
+        return None
+    tiles = np.asarray(tiles)
+    if tiles.shape != tile_grid(camera) or tiles.dtype.kind not in "bui":
+        raise SketchRodGSError(f"tiles: expected a {tile_grid(camera)} bool array, got {tiles.dtype} {tiles.shape}")
+    return np.ascontiguousarray(tiles != 0)
 
 
 def release_buffers() -> None:

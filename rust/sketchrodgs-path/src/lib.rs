@@ -49,6 +49,10 @@ pub enum PathError {
     StrokeBarelyOnObject { samples: usize },
     #[error("rendered tiles: expected {grid_x}x{grid_y} tiles, got {tiles}")]
     TileGrid { tiles: usize, grid_x: usize, grid_y: usize },
+    #[error(
+        "layers behind: expected a whole number of {pixels}-pixel layers, got {index} index, {depth} depth and {alpha} alpha values"
+    )]
+    BehindSize { pixels: usize, index: usize, depth: usize, alpha: usize },
     #[error("parameter {name} must be finite and > 0, got {value}")]
     BadParameter { name: &'static str, value: f64 },
 }
@@ -66,6 +70,44 @@ pub struct IndexImage<'a> {
     alpha: Option<&'a [f32]>,
     /// Where only part of the image was rendered: which tiles, and the record of reads outside.
     rendered: Option<&'a Rendered>,
+    /// What lies behind: further depth layers, each made like the image (docs/extraction.md,
+    /// "What lies behind").
+    behind: Option<Behind<'a>>,
+    /// Where the image is read from behind a depth, the depth per pixel (see [`Floor`]).
+    floor: Floor<'a>,
+}
+
+/// Depth layers behind an index image, each peeled from the one before it (the renderer's
+/// `rasterize_behind`), `count` images of the same size stacked layer after layer.
+#[derive(Debug, Clone, Copy)]
+struct Behind<'a> {
+    count: usize,
+    index: &'a [i32],
+    depth: &'a [f32],
+    alpha: &'a [f32],
+}
+
+/// The depth an image is read from: at each pixel, the first of its layers (front first) that has
+/// a Gaussian at or behind the floor shows; nothing shows where none has.
+#[derive(Debug, Clone, Copy)]
+enum Floor<'a> {
+    /// The front layer everywhere.
+    Front,
+    /// One depth for every pixel.
+    Depth(f32),
+    /// One depth per square cell of `FLOOR_CELL` pixels, row-major over `grid_x` cells a row.
+    Cells { grid_x: usize, depths: &'a [f32] },
+}
+
+/// Side of the square cells of a per-cell floor, in pixels.
+pub(crate) const FLOOR_CELL: usize = 8;
+
+/// Which layer shows at a pixel: the front image, a layer behind it, or nothing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Shown {
+    Front,
+    Behind(usize),
+    Nothing,
 }
 
 impl<'a> IndexImage<'a> {
@@ -75,7 +117,68 @@ impl<'a> IndexImage<'a> {
         if width == 0 || height == 0 || pixels != Some(index.len()) || pixels != Some(depth.len()) {
             return Err(PathError::ImageSize { width, height, index: index.len(), depth: depth.len() });
         }
-        Ok(Self { width, height, index, depth, alpha: None, rendered: None })
+        Ok(Self { width, height, index, depth, alpha: None, rendered: None, behind: None, floor: Floor::Front })
+    }
+
+    /// Add the layers behind the image: `index`, `depth` and `alpha` each hold a whole number of
+    /// images of this size, layer after layer, front to back (alpha as for `with_alpha`).
+    pub fn with_behind(self, index: &'a [i32], depth: &'a [f32], alpha: &'a [f32]) -> Result<Self, PathError> {
+        let pixels = self.width * self.height;
+        let count = index.len() / pixels;
+        if index.len() != count * pixels || depth.len() != index.len() || alpha.len() != index.len() {
+            return Err(PathError::BehindSize { pixels, index: index.len(), depth: depth.len(), alpha: alpha.len() });
+        }
+        Ok(Self { behind: Some(Behind { count, index, depth, alpha }), ..self })
+    }
+
+    /// Whether layers behind the image are known.
+    pub(crate) fn has_behind(&self) -> bool {
+        self.behind.is_some_and(|b| b.count > 0)
+    }
+
+    /// The image read from behind `depth`: each pixel shows the first layer with a Gaussian at or
+    /// behind it (the front image where it is there already).
+    pub(crate) fn seen_from_depth(&self, depth: f32) -> Self {
+        Self { floor: if self.has_behind() { Floor::Depth(depth) } else { Floor::Front }, ..*self }
+    }
+
+    /// The image read from behind a depth per cell of `FLOOR_CELL` pixels (`-inf`: the front; no
+    /// depths: the front everywhere).
+    pub(crate) fn seen_from_cells<'b>(&self, depths: &'b [f32]) -> IndexImage<'b>
+    where
+        'a: 'b,
+    {
+        let grid_x = self.width.div_ceil(FLOOR_CELL);
+        let floor =
+            if self.has_behind() && !depths.is_empty() { Floor::Cells { grid_x, depths } } else { Floor::Front };
+        IndexImage { floor, ..*self }
+    }
+
+    /// The layer that shows at pixel `p` (see [`Floor`]).
+    #[inline]
+    fn shown(&self, p: usize) -> Shown {
+        let floor = match self.floor {
+            Floor::Front => return Shown::Front,
+            Floor::Depth(z) => z,
+            Floor::Cells { grid_x, depths } => {
+                depths[(p / self.width) / FLOOR_CELL * grid_x + (p % self.width) / FLOOR_CELL]
+            }
+        };
+        if self.index[p] < 0 || self.depth[p] >= floor {
+            return Shown::Front;
+        }
+        let Some(behind) = self.behind else { return Shown::Nothing };
+        let pixels = self.width * self.height;
+        for layer in 0..behind.count {
+            let q = layer * pixels + p;
+            if behind.index[q] < 0 {
+                return Shown::Nothing;
+            }
+            if behind.depth[q] >= floor {
+                return Shown::Behind(q);
+            }
+        }
+        Shown::Nothing
     }
 
     /// Add the accumulated opacity image (same size), used to measure the object's width.
@@ -121,20 +224,57 @@ impl<'a> IndexImage<'a> {
     #[inline]
     pub(crate) fn id_at(&self, p: usize) -> i32 {
         self.note(p);
-        self.index[p]
+        match self.shown(p) {
+            Shown::Front => self.index[p],
+            Shown::Behind(q) => self.behind.map_or(-1, |b| b.index[q]),
+            Shown::Nothing => -1,
+        }
     }
 
     /// The camera z at pixel `p`.
     #[inline]
     pub(crate) fn depth(&self, p: usize) -> f32 {
         self.note(p);
-        self.depth[p]
+        match self.shown(p) {
+            Shown::Front => self.depth[p],
+            Shown::Behind(q) => self.behind.map_or(0.0, |b| b.depth[q]),
+            Shown::Nothing => 0.0,
+        }
     }
 
     /// Whether pixel `p` shows the object solidly: a Gaussian, and opacity >= 0.5 where known.
     #[inline]
     pub(crate) fn covered(&self, p: usize) -> bool {
-        self.id_at(p) >= 0 && self.alpha.is_none_or(|a| a[p] >= 0.5)
+        self.note(p);
+        match self.shown(p) {
+            Shown::Front => self.index[p] >= 0 && self.alpha.is_none_or(|a| a[p] >= 0.5),
+            Shown::Behind(q) => self.behind.is_some_and(|b| b.index[q] >= 0 && b.alpha[q] >= 0.5),
+            Shown::Nothing => false,
+        }
+    }
+
+    /// Every layer's Gaussian at pixel `p`, front first, as (layer, depth): 0 the front image, then
+    /// the solid ones of the layers behind it, until one has none.
+    pub(crate) fn layers_at(&self, p: usize, mut each: impl FnMut(usize, f32)) {
+        self.note(p);
+        if self.index[p] < 0 {
+            return;
+        }
+        each(0, self.depth[p]);
+        if let Some(behind) = self.behind {
+            let pixels = self.width * self.height;
+            for layer in 0..behind.count {
+                let q = layer * pixels + p;
+                if behind.index[q] < 0 {
+                    return;
+                }
+                // behind the front, only a solid layer is a surface: a faint haze of big
+                // Gaussians behind a leaf would otherwise pass for one
+                if behind.alpha[q] >= 0.5 {
+                    each(layer + 1, behind.depth[q]);
+                }
+            }
+        }
     }
 
     /// Gaussian at pixel `p` (flat index), if any.
@@ -143,9 +283,10 @@ impl<'a> IndexImage<'a> {
         u32::try_from(self.id_at(p)).ok()
     }
 
-    /// The largest Gaussian index in the image (-1 when none).
+    /// The largest Gaussian index in the image and its layers behind (-1 when none).
     pub(crate) fn max_id(&self) -> i32 {
-        self.index.iter().copied().max().unwrap_or(-1)
+        let behind = self.behind.map_or(&[][..], |b| b.index);
+        self.index.iter().chain(behind).copied().max().unwrap_or(-1)
     }
 
     /// Flat pixel index of continuous coordinates, if inside the image.

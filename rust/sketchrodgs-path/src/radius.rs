@@ -1,6 +1,7 @@
 //! The radius from the image (docs/extraction.md, "Radius"): half the object's width across the
 //! stroke (see `width`), in world units at its depth, the median over the stroke's samples on it.
 
+use crate::search::WALK_RADII;
 use crate::stroke::{CleanStroke, clean_stroke};
 use crate::width::{Walks, median};
 use crate::{IndexImage, PathError, TraceParams};
@@ -23,7 +24,12 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
     let first = half_widths(image, &loose, &under, focal, max_px);
     let Some(rough) = first else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
-    let clean = clean_stroke(image, stroke, band_px, crate::depth_gap(image, stroke, rough, focal), focal, None)?;
+    let gap = crate::depth_gap(image, stroke, rough, focal);
+    let clean = clean_stroke(image, stroke, band_px, gap, focal, None)?;
+    // what lies more than the gap in front of the chain is seen through (as the search does)
+    let rough_px = crate::depth_under(image, stroke).map_or(0.0, |z| rough * focal / z);
+    let floors = clean.floors(image, gap, band_px + WALK_RADII * rough_px);
+    let image = &image.seen_from_cells(&floors);
     // measure from the pixel under the sample where it is on the chain's surface, else from the
     // surface's pixel nearest the sample
     let anchors: Vec<Option<usize>> = clean

@@ -25,6 +25,9 @@ pub enum PieceEnd {
 pub struct Piece {
     /// Pixels `(col, row)` from start to end, 8-connected.
     pub pixels: Vec<[u32; 2]>,
+    /// The Gaussian the search saw at each pixel: the front image's, or where something lay in
+    /// front of the object, the one behind it (docs/extraction.md, "What lies behind").
+    pub pixel_ids: Vec<u32>,
     /// Distinct Gaussians under those pixels, in path order (first occurrence kept).
     pub gaussian_ids: Vec<u32>,
     pub end: PieceEnd,
@@ -39,6 +42,9 @@ pub struct Trace {
     pub clean_stroke: Vec<[f32; 2]>,
     /// Fraction of the input stroke's length (inside the image) within `cover_px` of the path.
     pub coverage: f32,
+    /// The image came without the layers behind it, and with them the trace might run elsewhere
+    /// (behind what lies in front of the object): give them and trace again.
+    pub wants_behind: bool,
 }
 
 /// Find the path under `stroke` (continuous pixel coordinates) over `image`.
@@ -61,6 +67,9 @@ pub fn trace_stroke(
     }
     let gap = crate::depth_gap(image, stroke, params.radius, params.focal_px);
     let clean = clean_stroke(image, stroke, params.band_px, gap, params.focal_px, Some(params.radius))?;
+    // from here on, what lies more than the gap in front of the object is seen through
+    let floors = clean.floors(image, gap, params.band_px + WALK_RADII * radius_px);
+    let image = &image.seen_from_cells(&floors);
     let band = label_band(image, &clean, params.band_px, gap);
     // the clean stroke starts and ends on the object, so both ends have band pixels near them
     let last = clean.points.len() - 1;
@@ -85,6 +94,7 @@ pub fn trace_stroke(
             PieceEnd::Lost { pixel: pixel_xy(image, band.pixel[end_node] as usize), progress: band.arc[end_node] }
         };
         pieces.push(Piece {
+            pixel_ids: pixels.iter().map(|&p| image.gaussian(p).unwrap_or(u32::MAX)).collect(),
             gaussian_ids: distinct_ids(image, &pixels),
             pixels: pixels.iter().map(|&p| pixel_xy(image, p)).collect(),
             end,
@@ -99,7 +109,7 @@ pub fn trace_stroke(
     }
     let coverage = covered.coverage(image, stroke);
     let on_chain = clean.points.iter().zip(&clean.anchor).filter(|(_, a)| a.is_some()).map(|(p, _)| *p).collect();
-    Ok(Trace { pieces, clean_stroke: on_chain, coverage })
+    Ok(Trace { pieces, clean_stroke: on_chain, coverage, wants_behind: clean.wants_behind })
 }
 
 /// The node of the nearest band pixel within `radius` of `point` that belongs to the stroke near
@@ -299,6 +309,10 @@ impl<'a> Search<'a> {
         path
     }
 }
+
+/// Width walks from a band pixel reach this many radii (`WIDE_FROM + WIDE_CAP` and a little): what
+/// lies in front of the object is seen through that far from the stroke.
+pub(crate) const WALK_RADII: f32 = 8.0;
 
 /// Per node: `WIDE_WEIGHT` times the excess width (in radii, capped) times a pixel's world size;
 /// all zero when the focal length is unknown. One walk across the stroke measures the surface's

@@ -10,15 +10,22 @@ use std::collections::BTreeSet;
 use rayon::prelude::*;
 
 use crate::width::{WIDE_CAP, Walks, normals};
-use crate::{IndexImage, PathError};
+use crate::{FLOOR_CELL, IndexImage, PathError};
 
 /// Spacing of the resampled stroke, in pixels.
 const SAMPLE_PX: f32 = 3.0;
 /// Standard deviation of the Gaussian smoothing along the stroke, in pixels of arc. It takes out
 /// hand jitter between the points a user drew; curves of the object are far wider than this.
 const SMOOTH_SIGMA_PX: f32 = 6.0;
-/// At most this many depth candidates per sample (the nearest surfaces to it).
+/// At most this many visible depth candidates per sample (the nearest surfaces to it), and as many
+/// behind them.
 const MAX_CANDIDATES: usize = 4;
+/// A surface seen only behind another (a stem behind a leaf) scores this share of a visible one:
+/// where both make a chain as long, the visible one is taken.
+const HIDDEN_SCORE: f32 = 0.9;
+/// The chain may run behind the front only where that scores this share more than the chain over
+/// the visible surfaces alone.
+const BEHIND_GAIN: f32 = 0.15;
 /// Depth may change by this much per unit of lateral distance along the stroke between two chain
 /// samples, on top of `3R`. It matters where the chain skips samples (over an occluder): between
 /// neighbouring samples `3R` alone already follows a steeply receding part.
@@ -43,6 +50,12 @@ pub(crate) struct CleanStroke {
     pub arc: Vec<f32>,
     /// Unit normal of the stroke at each sample (the direction widths are measured in).
     pub normal: Vec<[f32; 2]>,
+    /// Whether the chain runs behind what is in front of it somewhere (then the image is read from
+    /// behind, see `floors`).
+    pub behind: bool,
+    /// Whether the layers behind the image, were they given, could give another chain: the
+    /// visible one scores too little to be sure of.
+    pub wants_behind: bool,
 }
 
 impl CleanStroke {
@@ -59,6 +72,39 @@ impl CleanStroke {
     pub fn arc_at(&self, i: usize, t: f32) -> f32 {
         self.arc[i] + t * (self.arc[i + 1] - self.arc[i])
     }
+
+    /// The depth to read `image` from (`IndexImage::seen_from_cells`) so that what lies more than
+    /// `depth_gap` in front of the object is seen through (docs/extraction.md, "What lies
+    /// behind"): per cell of `FLOOR_CELL` pixels within `reach_px` of a sample, the object's
+    /// expected depth at the nearest sample less `depth_gap`; the front elsewhere (`-inf`). Empty
+    /// (the front everywhere) where the chain runs over visible surfaces only.
+    pub fn floors(&self, image: &IndexImage, depth_gap: f32, reach_px: f32) -> Vec<f32> {
+        if !self.behind {
+            return Vec::new();
+        }
+        let (grid_x, grid_y) = (image.width.div_ceil(FLOOR_CELL), image.height.div_ceil(FLOOR_CELL));
+        let half = FLOOR_CELL as f32 / 2.0;
+        let reach = reach_px + half * std::f32::consts::SQRT_2;
+        (0..grid_x * grid_y)
+            .into_par_iter()
+            .map(|cell| {
+                let centre = [
+                    (cell % grid_x) as f32 * FLOOR_CELL as f32 + half,
+                    (cell / grid_x) as f32 * FLOOR_CELL as f32 + half,
+                ];
+                let nearest = self
+                    .points
+                    .iter()
+                    .map(|p| (p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2))
+                    .enumerate()
+                    .min_by(|a, b| a.1.total_cmp(&b.1));
+                match nearest {
+                    Some((k, d2)) if d2 <= reach * reach => self.depth[k] - depth_gap,
+                    _ => f32::NEG_INFINITY,
+                }
+            })
+            .collect()
+    }
 }
 
 /// A surface near a stroke sample: the depth of its pixel nearest the sample and how well it fits.
@@ -67,6 +113,8 @@ struct Candidate {
     depth: f32,
     score: f32,
     pixel: usize,
+    /// 0: visible at `pixel`; else seen only in that layer behind the front.
+    layer: usize,
 }
 
 /// Clip, resample, smooth, and choose the depth chain. `reach_px` is how far from a sample a
@@ -101,11 +149,33 @@ pub(crate) fn clean_stroke(
     let candidates: Vec<Vec<Candidate>> = points
         .par_iter()
         .zip(&normal)
-        .map_init(Walks::default, |walks, (&p, &n)| {
-            surfaces_near(image, walks, p, n, reach_px, depth_gap / 3.0, slender)
-        })
+        .map_init(Walks::default, |walks, (&p, &n)| surfaces_near(image, walks, p, n, reach_px, depth_gap, slender))
         .collect();
-    let chain = depth_chain(&candidates, &arc, depth_gap, focal_px);
+    // The chain over the visible surfaces, and over those behind them too: the latter is taken
+    // only where it scores clearly more (a stem behind leaves, not a detour at a node).
+    let visible: Vec<Vec<Candidate>> =
+        candidates.iter().map(|c| c.iter().copied().filter(|c| c.layer == 0).collect()).collect();
+    let (mut chain, front_score) = depth_chain(&visible, &arc, depth_gap, focal_px);
+    let mut behind = false;
+    if image.has_behind() {
+        let (all, score) = depth_chain(&candidates, &arc, depth_gap, focal_px);
+        if score > front_score * (1.0 + BEHIND_GAIN) {
+            // the object is seen at the chain's ends: a part running behind something there is
+            // most often one joining it (a branch behind its trunk)
+            let hidden = |&(i, z, pixel): &(usize, f32, usize)| {
+                candidates[i].iter().any(|c| c.pixel == pixel && c.depth == z && c.layer > 0)
+            };
+            let first = all.iter().position(|m| !hidden(m));
+            let last = all.iter().rposition(|m| !hidden(m));
+            if let (Some(first), Some(last)) = (first, last) {
+                (chain, behind) = (all[first..=last].to_vec(), true);
+            }
+        }
+    }
+    // A surface behind scores at most HIDDEN_SCORE, so no chain over the layers behind scores more
+    // than this bound: only a visible chain scoring clearly less than it can be beaten.
+    let bound: f32 = visible.iter().map(|c| c.iter().map(|c| c.score).fold(HIDDEN_SCORE, f32::max)).sum();
+    let wants_behind = !image.has_behind() && front_score * (1.0 + BEHIND_GAIN) < bound;
     if chain.len() < 2 {
         let on_object = candidates.iter().filter(|c| !c.is_empty()).count();
         return Err(if on_object == 0 {
@@ -129,7 +199,15 @@ pub(crate) fn clean_stroke(
         anchor[i - first] = Some(pixel);
     }
     let arc = arc[first..=last].iter().map(|s| s - arc[first]).collect();
-    Ok(CleanStroke { points: points[first..=last].to_vec(), depth, anchor, arc, normal: normal[first..=last].to_vec() })
+    Ok(CleanStroke {
+        points: points[first..=last].to_vec(),
+        depth,
+        anchor,
+        arc,
+        normal: normal[first..=last].to_vec(),
+        behind,
+        wants_behind,
+    })
 }
 
 /// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed.
@@ -197,60 +275,78 @@ fn arc_lengths(points: &[[f32; 2]]) -> Vec<f32> {
     arc
 }
 
-/// The surfaces within `reach_px` of `point`: its object pixels grouped by depth (a gap over
-/// `split` starts a new surface), each represented by its pixel nearest the point. A surface
-/// scores higher the nearer it is and, given `slender` = (R, focal length), the less it is wider
-/// across the stroke (direction `normal`) than the part.
+/// The surfaces within `reach_px` of `point`: its object pixels, in every layer the image has
+/// (the front and those behind it), grouped by depth (a gap over a third of `depth_gap` starts a
+/// new surface), each represented by its pixel nearest the point. A surface scores higher the
+/// nearer it is, the less it is wider across the stroke (direction `normal`) than the part (given
+/// `slender` = (R, focal length)), and when it is visible there rather than behind another.
 fn surfaces_near(
     image: &IndexImage,
     walks: &mut Walks,
     point: [f32; 2],
     normal: [f32; 2],
     reach_px: f32,
-    split: f32,
+    depth_gap: f32,
     slender: Option<(f32, f32)>,
 ) -> Vec<Candidate> {
+    let split = depth_gap / 3.0;
     let reach = reach_px.ceil() as i64;
     let (cx, cy) = (point[0].floor() as i64, point[1].floor() as i64);
-    let mut pixels: Vec<(f32, f32, usize)> = Vec::new(); // (depth, distance, pixel)
+    let mut pixels: Vec<(f32, f32, usize, usize)> = Vec::new(); // (depth, distance, pixel, layer)
     for row in (cy - reach).max(0)..=(cy + reach).min(image.height as i64 - 1) {
         for col in (cx - reach).max(0)..=(cx + reach).min(image.width as i64 - 1) {
             let p = row as usize * image.width + col as usize;
-            if image.id_at(p) < 0 {
-                continue;
-            }
             let (dx, dy) = (col as f32 + 0.5 - point[0], row as f32 + 0.5 - point[1]);
             let d = (dx * dx + dy * dy).sqrt(); // not hypot: a libm call per pixel, for no gain here
             if d <= reach_px.max(0.75) {
-                pixels.push((image.depth(p), d, p));
+                image.layers_at(p, |layer, z| pixels.push((z, d, p, layer)));
             }
         }
     }
-    // by depth, ties in pixel order (the order of a stable sort of the scan), as one integer key
-    pixels.sort_unstable_by_key(|&(z, _, p)| (u64::from(ordered_bits(z)) << 32) | p as u64);
-    // (depth of the nearest pixel, its distance, pixel count, that pixel)
-    let mut surfaces: Vec<(f32, f32, usize, usize)> = Vec::new();
-    for (i, &(z, d, p)) in pixels.iter().enumerate() {
+    // by layer, then depth, ties in pixel order (the order of a stable sort of the scan), as one key;
+    // each layer is grouped on its own, so that a leaf sloping back towards a stem hidden behind it
+    // does not merge with the stem into one surface
+    pixels.sort_unstable_by_key(|&(z, _, p, layer)| {
+        ((layer as u128) << 96) | (u128::from(ordered_bits(z)) << 64) | p as u128
+    });
+    // (depth of the nearest pixel, its distance, pixel count, that pixel, its layer)
+    let mut surfaces: Vec<(f32, f32, usize, usize, usize)> = Vec::new();
+    for (i, &(z, d, p, layer)) in pixels.iter().enumerate() {
         match surfaces.last_mut() {
-            Some(s) if z - pixels[i - 1].0 <= split => {
+            Some(s) if s.4 == layer && z - pixels[i - 1].0 <= split => {
                 s.2 += 1;
                 if d < s.1 {
-                    (s.0, s.1, s.3) = (z, d, p);
+                    (s.0, s.1, s.3, s.4) = (z, d, p, layer);
                 }
             }
-            _ => surfaces.push((z, d, 1, p)),
+            _ => surfaces.push((z, d, 1, p, layer)),
         }
     }
     // a lone pixel is a stray Gaussian unless it is right under the point
     surfaces.retain(|s| s.2 >= 2 || s.1 <= 1.0);
     surfaces.sort_by(|a, b| a.1.total_cmp(&b.1));
-    surfaces.truncate(MAX_CANDIDATES);
+    // the nearest visible ones and the nearest behind, each on their own: what lies behind never
+    // crowds out a visible surface (the chain over visible ones is the same with layers or without)
+    let (mut visible, mut hidden) = (0, 0);
+    surfaces.retain(|s| {
+        let count = if s.4 == 0 { &mut visible } else { &mut hidden };
+        *count += 1;
+        *count <= MAX_CANDIDATES
+    });
     surfaces
         .iter()
         .map(|s| {
             let near = 1.0 - 0.5 * (s.1 / reach_px.max(1.0)).min(1.0);
-            let wide = slender.map_or(0.0, |(radius, focal)| walks.excess_width(image, s.3, normal, focal, radius));
-            Candidate { depth: s.0, score: near * (1.0 - WIDE_SCORE * wide / WIDE_CAP), pixel: s.3 }
+            // a surface behind another is measured on what lies behind the depth gap in front of it
+            let seen = if s.4 == 0 { *image } else { image.seen_from_depth(s.0 - depth_gap) };
+            let wide = slender.map_or(0.0, |(radius, focal)| walks.excess_width(&seen, s.3, normal, focal, radius));
+            let hidden = if s.4 == 0 { 1.0 } else { HIDDEN_SCORE };
+            Candidate {
+                depth: s.0,
+                score: hidden * near * (1.0 - WIDE_SCORE * wide / WIDE_CAP),
+                pixel: s.3,
+                layer: s.4,
+            }
         })
         .collect()
 }
@@ -261,12 +357,17 @@ pub(crate) fn ordered_bits(z: f32) -> u32 {
     if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
 }
 
-/// The chain of (sample, depth, pixel) with the largest total score whose consecutive members agree in
+/// The chain of (sample, depth, pixel) with the largest total score (returned with it) whose consecutive members agree in
 /// depth: `|dz| <= depth_gap + DEPTH_SLOPE * lateral`, lateral being the stroke length between them
 /// at that depth. Exact dynamic programming over all pairs (the stroke has a few hundred samples).
 /// Each node's best predecessor is the first compatible one in order of falling score: along a
 /// chain that is nearly always one of the last few, so the search rarely looks at many.
-fn depth_chain(candidates: &[Vec<Candidate>], arc: &[f32], depth_gap: f32, focal_px: f32) -> Vec<(usize, f32, usize)> {
+fn depth_chain(
+    candidates: &[Vec<Candidate>],
+    arc: &[f32],
+    depth_gap: f32,
+    focal_px: f32,
+) -> (Vec<(usize, f32, usize)>, f32) {
     let nodes: Vec<(usize, Candidate)> =
         candidates.iter().enumerate().flat_map(|(i, c)| c.iter().map(move |&c| (i, c))).collect();
     // lateral distance per pixel of arc is depth / focal (none when the focal length is unknown)
@@ -289,14 +390,17 @@ fn depth_chain(candidates: &[Vec<Candidate>], arc: &[f32], depth_gap: f32, focal
         best[b] = from.map_or(0.0, |a| best[a]) + nodes[b].1.score;
         previous[b] = from.unwrap_or(usize::MAX);
     }
-    let Some(mut node) = (0..nodes.len()).max_by(|&a, &b| best[a].total_cmp(&best[b])) else { return Vec::new() };
+    let Some(mut node) = (0..nodes.len()).max_by(|&a, &b| best[a].total_cmp(&best[b])) else {
+        return (Vec::new(), 0.0);
+    };
+    let total = best[node];
     let mut chain = vec![(nodes[node].0, nodes[node].1.depth, nodes[node].1.pixel)];
     while previous[node] != usize::MAX {
         node = previous[node];
         chain.push((nodes[node].0, nodes[node].1.depth, nodes[node].1.pixel));
     }
     chain.reverse();
-    chain
+    (chain, total)
 }
 
 #[cfg(test)]
@@ -347,11 +451,12 @@ mod tests {
                             depth: 1.0 + 0.05 * next(6) as f32 + 0.001 * i as f32,
                             score: 0.25 * (1 + next(4)) as f32,
                             pixel: i * 4 + k as usize,
+                            layer: 0,
                         })
                         .collect()
                 })
                 .collect();
-            let chain: Vec<usize> = depth_chain(&candidates, &arc, 0.03, 500.0).iter().map(|c| c.0).collect();
+            let chain: Vec<usize> = depth_chain(&candidates, &arc, 0.03, 500.0).0.iter().map(|c| c.0).collect();
             let expected = depth_chain_by_all_pairs(&candidates, &arc, 0.03, 500.0);
             if candidates.iter().any(|c| !c.is_empty()) {
                 assert_eq!(chain, expected);

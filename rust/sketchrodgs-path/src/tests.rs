@@ -361,3 +361,88 @@ fn depth_keys_order_as_total_cmp() {
     keys.sort_unstable();
     assert_eq!(keys, values.iter().map(|&z| crate::stroke::ordered_bits(z)).collect::<Vec<_>>());
 }
+
+/// A rope at depth 5 (rows 19..=21) behind a leaf at depth 4 over cols 20..=50 (rows 5..=35): the
+/// front image, and the layer behind it holding the rope where the leaf hides it.
+struct HiddenRope {
+    front: Synthetic,
+    behind_index: Vec<i32>,
+    behind_depth: Vec<f32>,
+    behind_alpha: Vec<f32>,
+}
+
+impl HiddenRope {
+    fn new() -> Self {
+        let leaf = |col: usize, row: usize| (20..=50).contains(&col) && (5..=35).contains(&row);
+        let mut front =
+            Synthetic::new(80, 40, FOCAL, |col, row| if leaf(col, row) { Some(4.0) } else { rope(col, row) });
+        let pixels = front.width * front.height;
+        let (mut behind_index, mut behind_depth) = (vec![-1; pixels], vec![0.0; pixels]);
+        for row in 19..=21 {
+            for col in 20..=50 {
+                let p = row * front.width + col;
+                behind_index[p] = front.centres.len() as i32;
+                behind_depth[p] = 5.0;
+                front.centres.push([(col as f32 + 0.5) * 5.0 / FOCAL, (row as f32 + 0.5) * 5.0 / FOCAL, 5.0]);
+            }
+        }
+        let behind_alpha = behind_index.iter().map(|&k| if k >= 0 { 1.0 } else { 0.0 }).collect();
+        Self { front, behind_index, behind_depth, behind_alpha }
+    }
+
+    fn trace(&self, with_behind: bool) -> Trace {
+        let image = self.front.image();
+        let image = if with_behind {
+            image.with_behind(&self.behind_index, &self.behind_depth, &self.behind_alpha).unwrap()
+        } else {
+            image
+        };
+        let params = TraceParams { radius: 0.075, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
+        trace_stroke(&image, &self.front.centres, &[[2.5, 20.5], [77.5, 20.5]], &params).unwrap()
+    }
+}
+
+#[test]
+fn a_rope_behind_a_leaf_is_followed_behind_it_when_the_layers_behind_are_given() {
+    let scene = HiddenRope::new();
+    // front only: the path stops at the leaf and resumes past it, and asks for what lies behind
+    let front = scene.trace(false);
+    assert!(front.wants_behind);
+    assert_eq!(front.pieces.len(), 2);
+    // with the layer behind: one piece on the rope, the Gaussians behind the leaf included
+    let behind = scene.trace(true);
+    assert!(!behind.wants_behind);
+    assert_eq!(behind.pieces.len(), 1);
+    let piece = &behind.pieces[0];
+    assert_eq!(piece.end, PieceEnd::Goal);
+    assert!(scene.front.rows_of(piece).iter().all(|r| (19..=21).contains(r)));
+    for (pixel, &id) in piece.pixels.iter().zip(&piece.pixel_ids) {
+        let p = pixel[1] as usize * scene.front.width + pixel[0] as usize;
+        let seen = if (20..=50).contains(&pixel[0]) { scene.behind_index[p] } else { scene.front.index[p] };
+        assert_eq!(id as i32, seen, "pixel {pixel:?}");
+    }
+}
+
+#[test]
+fn layers_behind_a_visible_part_change_nothing() {
+    // the rope in front of the leaf: a layer behind it (the leaf) is not taken
+    let leaf = |col: usize, row: usize| (20..=50).contains(&col) && (5..=35).contains(&row);
+    let scene = Synthetic::new(80, 40, FOCAL, |col, row| rope(col, row).map(|_| 4.0).or(leaf(col, row).then_some(5.0)));
+    let pixels = scene.width * scene.height;
+    let behind_index: Vec<i32> =
+        (0..pixels).map(|p| if scene.depth[p] == 4.0 && leaf(p % 80, p / 80) { 0 } else { -1 }).collect();
+    let behind_depth = vec![5.0; pixels];
+    let behind_alpha = vec![1.0; pixels];
+    let params = TraceParams { radius: 0.05, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
+    let stroke = [[2.5, 20.5], [77.5, 20.5]];
+    let plain = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
+    let image = scene.image().with_behind(&behind_index, &behind_depth, &behind_alpha).unwrap();
+    let layered = trace_stroke(&image, &scene.centres, &stroke, &params).unwrap();
+    assert!(!plain.wants_behind);
+    assert_eq!(plain, layered);
+    // layers of the wrong size are an error
+    assert!(matches!(
+        scene.image().with_behind(&behind_index[1..], &behind_depth, &behind_alpha),
+        Err(PathError::BehindSize { .. })
+    ));
+}

@@ -1,7 +1,10 @@
 //! Bindings for `sketchrodgs-path`: `_core.trace_stroke(...)`.
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadwriteArray2, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadwriteArray2,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
 
@@ -27,7 +30,7 @@ fn path_err(err: PathError) -> PyErr {
 /// says that only those 16x16 tiles were rendered; reads outside them are set in `missed`
 /// (same shape, bool), also when the trace fails.
 #[pyfunction]
-#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None, rendered = None, missed = None))]
+#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None, rendered = None, missed = None, behind = None))]
 #[allow(clippy::too_many_arguments)]
 fn trace_stroke<'py>(
     py: Python<'py>,
@@ -43,6 +46,7 @@ fn trace_stroke<'py>(
     alpha: Option<Bound<'py, PyArray2<f32>>>,
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
+    behind: Option<BehindArgs<'py>>,
 ) -> PyResult<Trace> {
     let (index, depth, centres, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
@@ -56,6 +60,10 @@ fn trace_stroke<'py>(
     if let Some(alpha) = &alpha {
         check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
         image = image.with_alpha(contiguous(alpha, "alpha")?).map_err(path_err)?;
+    }
+    let behind = behind.map(|b| BehindArrays::read(b, height, width)).transpose()?;
+    if let Some(b) = &behind {
+        image = b.attach(image)?;
     }
     let centres: &[[f32; 3]] = as_rows(contiguous(&centres, "centres")?);
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
@@ -81,6 +89,7 @@ fn trace_stroke<'py>(
                 py,
                 TracePiece {
                     pixels: pixels.into_pyarray(py).unbind(),
+                    pixel_ids: piece.pixel_ids.into_pyarray(py).unbind(),
                     gaussian_ids: piece.gaussian_ids.into_pyarray(py).unbind(),
                     reached_goal,
                     lost_pixel,
@@ -92,33 +101,42 @@ fn trace_stroke<'py>(
     let kept = trace.clean_stroke.len();
     let clean = Array2::from_shape_vec((kept, 2), trace.clean_stroke.into_iter().flatten().collect())
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
-    Ok(Trace { pieces, clean_stroke: clean.into_pyarray(py).unbind(), coverage: trace.coverage })
+    Ok(Trace {
+        pieces,
+        clean_stroke: clean.into_pyarray(py).unbind(),
+        coverage: trace.coverage,
+        wants_behind: trace.wants_behind,
+    })
 }
 
-/// One piece of a trace: its pixels (P, 2) uint32 (col, row), its Gaussians in order, and how it
+/// One piece of a trace: its pixels (P, 2) uint32 (col, row), the Gaussian the search saw at each
+/// (P,) uint32 (of the front image or a layer behind it), its Gaussians in order, and how it
 /// ended (at the stroke's end, or lost at a pixel, that far along the stroke).
 #[pyclass(module = "sketchrodgs._core", name = "TracePiece", frozen, get_all)]
 pub struct TracePiece {
     pixels: Py<PyArray2<u32>>,
+    pixel_ids: Py<PyArray1<u32>>,
     gaussian_ids: Py<PyArray1<u32>>,
     reached_goal: bool,
     lost_pixel: Option<(u32, u32)>,
     lost_progress: Option<f32>,
 }
 
-/// A trace: its pieces, the stroke as cleaned up (M', 2) float32, and the share of it covered.
+/// A trace: its pieces, the stroke as cleaned up (M', 2) float32, the share of it covered, and
+/// whether the layers behind the image, not given, could change it (`wants_behind`).
 #[pyclass(module = "sketchrodgs._core", name = "Trace", frozen, get_all)]
 pub struct Trace {
     pieces: Vec<Py<TracePiece>>,
     clean_stroke: Py<PyArray2<f32>>,
     coverage: f32,
+    wants_behind: bool,
 }
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
 /// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width;
 /// `rendered` and `missed` as for `trace_stroke`.
 #[pyfunction]
-#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None))]
+#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None, behind = None))]
 #[allow(clippy::too_many_arguments)]
 fn estimate_radius<'py>(
     py: Python<'py>,
@@ -130,6 +148,7 @@ fn estimate_radius<'py>(
     band_px: f32,
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
+    behind: Option<BehindArgs<'py>>,
 ) -> PyResult<f32> {
     let (index, depth, alpha, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
@@ -141,6 +160,11 @@ fn estimate_radius<'py>(
     let image = IndexImage::new(width, height, contiguous(&index, "index")?, contiguous(&depth, "depth")?)
         .and_then(|image| image.with_alpha(alpha))
         .map_err(path_err)?;
+    let behind = behind.map(|b| BehindArrays::read(b, height, width)).transpose()?;
+    let image = match &behind {
+        Some(b) => b.attach(image)?,
+        None => image,
+    };
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
     let params = TraceParams { band_px, focal_px, ..TraceParams::default() };
     let region = RegionArgs::new(rendered.as_ref(), missed.as_ref(), width, height)?;
@@ -148,6 +172,35 @@ fn estimate_radius<'py>(
     let radius = run_parallel(py, "estimate_radius", || sketchrodgs_path::estimate_radius(&image, stroke, &params));
     region.report()?;
     radius?.map_err(path_err)
+}
+
+/// The layers behind the image, (index, depth, alpha) each (L, H, W): int32, float32, float32
+/// (`sketchrodgs.render.render_behind`, stacked).
+type BehindArgs<'py> = (Bound<'py, PyArray3<i32>>, Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<f32>>);
+
+/// The layers behind, borrowed read-only.
+struct BehindArrays<'py>(PyReadonlyArray3<'py, i32>, PyReadonlyArray3<'py, f32>, PyReadonlyArray3<'py, f32>);
+
+impl<'py> BehindArrays<'py> {
+    /// Borrow the arrays, checking that each holds layers of `height x width`.
+    fn read((index, depth, alpha): BehindArgs<'py>, height: usize, width: usize) -> PyResult<Self> {
+        let (index, depth, alpha) = (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?);
+        let layers = index.shape()[0];
+        for (name, shape) in
+            [("behind index", index.shape()), ("behind depth", depth.shape()), ("behind alpha", alpha.shape())]
+        {
+            check_shape(name, shape, &[Some(layers), Some(height), Some(width)])?;
+        }
+        Ok(Self(index, depth, alpha))
+    }
+
+    /// The image with these layers behind it.
+    fn attach<'a>(&'a self, image: IndexImage<'a>) -> PyResult<IndexImage<'a>> {
+        let index = contiguous(&self.0, "behind index")?;
+        let depth = contiguous(&self.1, "behind depth")?;
+        let alpha = contiguous(&self.2, "behind alpha")?;
+        image.with_behind(index, depth, alpha).map_err(path_err)
+    }
 }
 
 /// Side of the tiles of `rendered` (the rasteriser's).

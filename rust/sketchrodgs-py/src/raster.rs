@@ -54,21 +54,65 @@ fn rasterize<'py>(
     let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
     let options = options_of(background, mode)?;
 
-    let mask = match tiles {
-        None => None,
-        Some(tiles) => {
-            let tiles = tiles.try_readonly()?;
-            let (grid_x, grid_y) = camera.tile_grid();
-            check_shape("tiles", tiles.shape(), &[Some(grid_y as usize), Some(grid_x as usize)])?;
-            Some(TileMask::new(&camera, contiguous(&tiles, "tiles")?.to_vec()).map_err(raster_err)?)
-        }
-    };
+    let mask = tile_mask(&camera, tiles)?;
     let out = run_parallel(py, "rasterize", || match &mask {
         None => sketchrodgs_raster::rasterize(&splats, &camera, &options),
         Some(mask) => sketchrodgs_raster::rasterize_tiles(&splats, &camera, &options, mask),
     })?;
     let out = out.map_err(raster_err)?;
     into_rendered(py, out)
+}
+
+/// Depth layers behind `near` ((H, W) float32 camera z) in "solid" mode
+/// (`sketchrodgs_raster::rasterize_behind`): `count` `Rendered`, each layer behind the last by
+/// `gap_px` pixels' world size. Scene, camera and `tiles` as for `rasterize`.
+#[pyfunction]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, near, count, gap_px, tiles = None, sh_rows = None, sort_offsets = None))]
+#[allow(clippy::too_many_arguments)]
+fn rasterize_behind<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyArray2<f32>>,
+    scales: &Bound<'py, PyArray2<f32>>,
+    quats: &Bound<'py, PyArray2<f32>>,
+    opacities: &Bound<'py, PyArray1<f32>>,
+    sh: &Bound<'py, PyArray3<f32>>,
+    world_to_camera: &Bound<'py, PyArray2<f64>>,
+    width: u32,
+    height: u32,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+    near: &Bound<'py, PyArray2<f32>>,
+    count: usize,
+    gap_px: f32,
+    tiles: Option<&Bound<'py, PyArray2<bool>>>,
+    sh_rows: Option<&Bound<'py, PyArray1<u32>>>,
+    sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
+) -> PyResult<Vec<Rendered>> {
+    let scene = SceneInput::new(means, scales, quats, opacities, sh, sh_rows, sort_offsets)?;
+    let splats = scene.splats()?;
+    let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
+    let mask = tile_mask(&camera, tiles)?;
+    let near = near.try_readonly()?;
+    check_shape("near", near.shape(), &[Some(height as usize), Some(width as usize)])?;
+    let near = contiguous(&near, "near")?;
+    if !(gap_px.is_finite() && gap_px >= 0.0) {
+        return Err(SketchRodGSError::new_err(format!("gap_px: must be finite and >= 0, got {gap_px}")));
+    }
+    let layers = run_parallel(py, "rasterize_behind", || {
+        sketchrodgs_raster::rasterize_behind(&splats, &camera, mask.as_ref(), near, count, gap_px)
+    })?;
+    layers.map_err(raster_err)?.into_iter().map(|out| into_rendered(py, out)).collect()
+}
+
+/// The `tiles` argument as a mask (None: the whole image).
+fn tile_mask(camera: &Camera, tiles: Option<&Bound<'_, PyArray2<bool>>>) -> PyResult<Option<TileMask>> {
+    let Some(tiles) = tiles else { return Ok(None) };
+    let tiles = tiles.try_readonly()?;
+    let (grid_x, grid_y) = camera.tile_grid();
+    check_shape("tiles", tiles.shape(), &[Some(grid_y as usize), Some(grid_x as usize)])?;
+    Ok(Some(TileMask::new(camera, contiguous(&tiles, "tiles")?.to_vec()).map_err(raster_err)?))
 }
 
 /// The scene arrays as Python passes them (see `rasterize`), borrowed read-only, shapes checked.
@@ -286,6 +330,7 @@ fn release_render_buffers() {
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(rasterize_behind, m)?)?;
     m.add_function(wrap_pyfunction!(release_render_buffers, m)?)?;
     m.add_class::<RetainedRender>()?;
     m.add_class::<Rendered>()?;

@@ -74,6 +74,21 @@ pub fn composite<S: Source>(
     Ok(out)
 }
 
+/// As [`composite`] in [`RenderMode::IndexSolid`], with each pixel blending only the Gaussians
+/// deeper than its entry of `near` (camera z, row-major (H * W); `f32::INFINITY` leaves a pixel
+/// empty): what the camera would see with everything in front of `near` taken away.
+pub fn composite_behind<S: Source>(
+    camera: &Camera,
+    source: &S,
+    mask: Option<&TileMask>,
+    near: &[f32],
+) -> Result<RenderOutput, RasterError> {
+    let options = RenderOptions { mode: RenderMode::IndexSolid, ..RenderOptions::default() };
+    let mut out = blank(camera, &options)?;
+    composite_all(Simd::detect(), &mut out, camera, source, &options, mask, Some(near));
+    Ok(out)
+}
+
 /// An output of background only (index -1, alpha 0); an error where it does not fit in memory.
 pub fn blank(camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, RasterError> {
     let (width, height) = (camera.width as usize, camera.height as usize);
@@ -124,6 +139,21 @@ pub(crate) fn composite_with<S: Source>(
     options: &RenderOptions,
     mask: Option<&TileMask>,
 ) {
+    composite_all(simd, out, camera, source, options, mask, None);
+}
+
+/// Blends into `out`; with `near` (only in [`RenderMode::IndexSolid`]) each pixel takes only the
+/// Gaussians deeper than its entry.
+fn composite_all<S: Source>(
+    simd: Simd,
+    out: &mut RenderOutput,
+    camera: &Camera,
+    source: &S,
+    options: &RenderOptions,
+    mask: Option<&TileMask>,
+    near: Option<&[f32]>,
+) {
+    debug_assert!(near.is_none() || options.mode == RenderMode::IndexSolid);
     let (width, height) = (camera.width as usize, camera.height as usize);
     let grid_x = camera.tile_grid().0 as usize;
     let n_bands = height.div_ceil(TILE);
@@ -143,7 +173,7 @@ pub(crate) fn composite_with<S: Source>(
         bands.push(Band { row0: b * TILE, rgb, alpha, depth, index, index_depth });
     }
     let render = |band: Band| {
-        let job = BandJob { width, height, grid_x, source, background: options.background, mask };
+        let job = BandJob { width, height, grid_x, source, background: options.background, mask, near };
         match (simd, options.mode) {
             (Simd::Four, RenderMode::Full) => render_band::<true, false, F32x4, S>(band, &job),
             (Simd::Four, RenderMode::IndexOnly) => render_band::<false, false, F32x4, S>(band, &job),
@@ -163,6 +193,8 @@ struct BandJob<'a, S> {
     source: &'a S,
     background: [f32; 3],
     mask: Option<&'a TileMask>,
+    /// Per pixel, the camera z a Gaussian must exceed to be blended there (index-solid only).
+    near: Option<&'a [f32]>,
 }
 
 /// [`render_band`] with eight lanes, compiled for AVX2.
@@ -206,6 +238,8 @@ struct TileState {
     depth: [Row; TILE],
     max_weight: [Row; TILE],
     max_id: [[u32; TILE]; TILE],
+    /// Camera z a Gaussian must exceed to be blended at each pixel (index-solid mode only).
+    near: [Row; TILE],
     /// Per row, bit x is set while pixel x still blends: cleared once it stopped (T would drop
     /// below T_MIN) and never set outside the image.
     live: [u16; TILE],
@@ -221,6 +255,7 @@ impl TileState {
             depth: [[0.0; TILE]; TILE],
             max_weight: [[0.0; TILE]; TILE],
             max_id: [[NO_GAUSSIAN; TILE]; TILE],
+            near: [[f32::NEG_INFINITY; TILE]; TILE],
             live: [0; TILE],
         }
     }
@@ -232,12 +267,38 @@ impl TileState {
         self.live.iter_mut().take(rows).for_each(|l| *l = bits);
         cols * rows
     }
+
+    /// After `reset`: each pixel blends only Gaussians deeper than its entry of `near` (the
+    /// image's, `width` wide) and never starts where that is infinite. Returns the live count.
+    fn start_behind(
+        &mut self,
+        near: &[f32],
+        width: usize,
+        col0: usize,
+        row0: usize,
+        cols: usize,
+        rows: usize,
+    ) -> usize {
+        let mut live = 0;
+        for y in 0..rows {
+            let row = &near[(row0 + y) * width + col0..][..cols];
+            self.near[y][..cols].copy_from_slice(row);
+            for (x, z) in row.iter().enumerate() {
+                if *z == f32::INFINITY {
+                    self.live[y] &= !(1 << x);
+                } else {
+                    live += 1;
+                }
+            }
+        }
+        live
+    }
 }
 
 /// Blends every tile of `band` (those of the job's mask only, when it has one).
 #[inline(always)] // into `render_band_eight` too, so that the lanes compile for AVX2 there
 fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: Band, job: &BandJob<S>) {
-    let &BandJob { width, height, grid_x, source, background, mask } = job;
+    let &BandJob { width, height, grid_x, source, background, mask, near } = job;
     let row0 = band.row0;
     let rows = TILE.min(height - row0);
     let tile_y = row0 / TILE;
@@ -251,6 +312,9 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
         let col0 = tile_x * TILE;
         let cols = TILE.min(width - col0);
         let mut live = state.reset(cols, rows);
+        if SOLID && let Some(near) = near {
+            live = state.start_behind(near, width, col0, row0, cols, rows);
+        }
         'lists: for list in source.lists(tile) {
             for batch in list.chunks(BATCH) {
                 // Copy the batch first: the loads are independent, so their cache misses overlap
@@ -352,7 +416,10 @@ fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
                 continue; // every lane would get alpha < 1/255: skipped, T untouched
             }
             let alpha = (opacity * power.exp_nonpositive()).min(s(ALPHA_MAX));
-            let valid = lanes.and(power.le(s(0.0))).and(alpha.ge(s(ALPHA_MIN)));
+            let mut valid = lanes.and(power.le(s(0.0))).and(alpha.ge(s(ALPHA_MIN)));
+            if SOLID {
+                valid = valid.and(z.gt(V::load(&state.near[y], gi)));
+            }
             let t = V::load(&state.transmittance[y], gi);
             let test_t = t * (s(1.0) - alpha);
             let stop = valid.and(test_t.lt(s(T_MIN)));

@@ -320,6 +320,62 @@ pub fn rasterize_tiles(
     render(splats, camera, options, Some(tiles))
 }
 
+/// Depth layers behind `near` (camera z per pixel, row-major (H * W)), in
+/// [`RenderMode::IndexSolid`], of the tiles of `tiles` (all when None): layer 0 blends at each
+/// pixel only the Gaussians deeper than `near` there, and each further layer only those deeper
+/// than the last layer's index depth plus `gap_px` pixels' world size at that depth (nothing
+/// where the last layer had no Gaussian). `count` layers; the Gaussians are projected and sorted
+/// once for all of them. What lies behind a leaf in front of a stem (docs/extraction.md,
+/// "What lies behind").
+pub fn rasterize_behind(
+    splats: &Splats,
+    camera: &Camera,
+    tiles: Option<&TileMask>,
+    near: &[f32],
+    count: usize,
+    gap_px: f32,
+) -> Result<Vec<RenderOutput>, RasterError> {
+    camera.validate()?;
+    splats.validate()?;
+    let pixels = camera.width as usize * camera.height as usize;
+    if near.len() != pixels {
+        return Err(RasterError::LengthMismatch { name: "near", expected: pixels, got: near.len() });
+    }
+    if let Some(tiles) = tiles {
+        let (grid_x, grid_y) = camera.tile_grid();
+        if tiles.grid() != (grid_x as usize, grid_y as usize) {
+            let (x, y) = tiles.grid();
+            return Err(RasterError::LengthMismatch {
+                name: "tiles",
+                expected: (grid_x * grid_y) as usize,
+                got: x * y,
+            });
+        }
+    }
+    let projected = project::project(splats, camera, false, tiles);
+    let order = bin::sort_by_depth(&projected);
+    let n_pairs: usize =
+        projected.rects.par_iter().with_min_len(project::MIN_GAUSSIANS_PER_TASK).map(|r| r.area()).sum();
+    if n_pairs > MAX_TILE_PAIRS {
+        return Err(RasterError::TooManyTilePairs(n_pairs));
+    }
+    let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles)?;
+    let source = composite::Binned { projected: &projected, bins: &bins };
+    let step = 1.0 + gap_px / camera.fx as f32;
+    let mut layers: Vec<RenderOutput> = Vec::with_capacity(count);
+    let mut near = near.to_vec();
+    for _ in 0..count {
+        if let Some(last) = layers.last() {
+            near.par_iter_mut().zip(&last.index).zip(&last.index_depth).for_each(|((n, &k), &z)| {
+                *n = if k >= 0 { z * step } else { f32::INFINITY };
+            });
+        }
+        layers.push(composite::composite_behind(camera, &source, tiles, &near)?);
+    }
+    projected.give_back();
+    Ok(layers)
+}
+
 fn render(
     splats: &Splats,
     camera: &Camera,

@@ -404,3 +404,82 @@ fn renders_after_a_larger_one_reuse_its_buffers_and_match_a_fresh_render() {
         assert_eq!(again.n_visible, fresh.n_visible);
     }
 }
+
+/// The Gaussians of `scene` whose camera z (the identity camera: their mean's z) exceeds `near`,
+/// and their rows in `scene`.
+fn deeper_than(scene: &Scene, near: f32) -> (Scene, Vec<i32>) {
+    let rows: Vec<usize> = (0..scene.means.len()).filter(|&i| scene.means[i].z > near).collect();
+    let k3 = scene.k * 3;
+    let subset = Scene {
+        means: rows.iter().map(|&i| scene.means[i]).collect(),
+        scales: rows.iter().map(|&i| scene.scales[i]).collect(),
+        quats: rows.iter().map(|&i| scene.quats[i]).collect(),
+        opacities: rows.iter().map(|&i| scene.opacities[i]).collect(),
+        sh: rows.iter().flat_map(|&i| scene.sh[i * k3..(i + 1) * k3].iter().copied()).collect(),
+        k: scene.k,
+    };
+    (subset, rows.iter().map(|&i| i as i32).collect())
+}
+
+#[test]
+fn a_layer_behind_a_depth_is_the_render_of_what_lies_deeper() {
+    let scene = Scene::random(20_000, 1, 7);
+    let cam = camera(160, 120);
+    let solid = RenderOptions { mode: RenderMode::IndexSolid, ..RenderOptions::default() };
+    // left half behind z = 2, right half behind z = 3
+    let (width, height) = (160, 120);
+    let near: Vec<f32> = (0..width * height).map(|p| if p % width < width / 2 { 2.0 } else { 3.0 }).collect();
+    let layers = rasterize_behind(&scene.splats(), &cam, None, &near, 1, 8.0).unwrap();
+    for (cut, left) in [(2.0, true), (3.0, false)] {
+        let (deeper, rows) = deeper_than(&scene, cut);
+        let expected = rasterize(&deeper.splats(), &cam, &solid).unwrap();
+        let mut compared = 0;
+        for p in (0..width * height).filter(|p| (p % width < width / 2) == left) {
+            let k = expected.index[p];
+            assert_eq!(layers[0].index[p], if k >= 0 { rows[k as usize] } else { -1 }, "pixel {p}");
+            assert_eq!(layers[0].index_depth[p], expected.index_depth[p]);
+            assert_eq!(layers[0].alpha[p] >= 0.5, expected.alpha[p] >= 0.5);
+            compared += usize::from(k >= 0);
+        }
+        assert!(compared > 1000);
+    }
+    // nothing in front of every Gaussian: the plain index-solid render
+    let everything = rasterize_behind(&scene.splats(), &cam, None, &vec![f32::NEG_INFINITY; width * height], 1, 8.0);
+    let plain = rasterize(&scene.splats(), &cam, &solid).unwrap();
+    assert_eq!(everything.unwrap()[0].index, plain.index);
+}
+
+#[test]
+fn each_layer_lies_a_gap_behind_the_one_before() {
+    // three opaque sheets at z = 2, 2.05 and 4 over the whole image; a gap of 8 px at 100 px focal
+    // length is 8 % of the depth, so the sheet at 2.05 is peeled with the one at 2
+    let sheet = |z: f32| Scene {
+        means: vec![Vec3::new(0.0, 0.0, z)],
+        scales: vec![Vec3::new(5.0, 5.0, 0.001)],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]],
+        opacities: vec![1.0],
+        sh: vec![0.0; 3],
+        k: 1,
+    };
+    let mut scene = sheet(2.0);
+    for z in [2.05, 4.0] {
+        let s = sheet(z);
+        scene.means.extend(s.means);
+        scene.scales.extend(s.scales);
+        scene.quats.extend(s.quats);
+        scene.opacities.extend(s.opacities);
+        scene.sh.extend(s.sh);
+    }
+    let cam = camera(32, 32);
+    let near = vec![f32::NEG_INFINITY; 32 * 32];
+    let layers = rasterize_behind(&scene.splats(), &cam, None, &near, 3, 8.0).unwrap();
+    let centre = 16 * 32 + 16;
+    assert_eq!(layers.iter().map(|l| l.index[centre]).collect::<Vec<_>>(), [0, 2, -1]);
+    // only the tiles asked for are rendered
+    let mut on = vec![false; 4];
+    on[0] = true;
+    let mask = TileMask::new(&cam, on).unwrap();
+    let some = rasterize_behind(&scene.splats(), &cam, Some(&mask), &near, 2, 8.0).unwrap();
+    assert_eq!((some[1].index[0], some[1].index[centre]), (2, -1));
+    assert!(rasterize_behind(&scene.splats(), &cam, None, &near[1..], 1, 8.0).is_err());
+}
