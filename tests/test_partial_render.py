@@ -184,6 +184,10 @@ def test_a_stem_behind_leaves_is_found_behind_them(monkeypatch):
     hidden = extract_rod(scene, *views["az315"], radius=radius)
     agree = cs.polyline_agreement(hidden.polyline, clear.polyline, radius)
     assert agree["mean"] < 1.5 and agree["overlap"] > 0.8, agree
+    # with the radius estimated, the stem is measured, not the leaves in front of it
+    estimated = extract_rod(scene, *views["az315"])
+    assert 0.7 < estimated.radius / radius < 1.4, estimated.radius / radius
+    assert cs.polyline_agreement(estimated.polyline, clear.polyline, radius)["mean"] < 1.5
     # the rod's path takes Gaussians that the front image of az315 does not show
     front = render(scene, views["az315"][0], outputs=SOLID_OUTPUTS)
     assert not np.isin(hidden.path_gaussian_ids, front.index).all()

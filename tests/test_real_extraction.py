@@ -45,7 +45,7 @@ MISSES = {
         "tree_branch_lower_left",
         "tree_branch_tall",
     },
-    "radius": {"donut_sprinkle_b", "guitar_stand_leg_left", "guitar_stand_leg_right", "plant_main_stem"},
+    "radius": {"donut_sprinkle_b", "guitar_stand_leg_left", "guitar_stand_leg_right"},
 }
 
 

@@ -324,7 +324,7 @@ def extract_rod(
         # what lies in front of the object asks for the layers behind; it then runs again with them.
         missed = partial.missed()
         try:
-            radius_found, estimated, trace, pixel_path, path_ids, points = _trace(
+            radius_found, estimated, wants_behind, trace, pixel_path, path_ids, points = _trace(
                 scene, camera, partial, stroke, radius, alpha, band_px, timings, missed
             )
         except PathNotFoundError:
@@ -333,7 +333,7 @@ def extract_rod(
         clock = time.perf_counter()
         if missed.any():
             partial.add(missed)
-        elif trace.wants_behind and not layered:
+        elif wants_behind and not layered:
             partial.add_behind(BEHIND_LAYERS, band_tiles(camera, stroke, band + MARGIN_PX))
             layered = True
         else:
@@ -406,16 +406,18 @@ def _trace(
     missed: np.ndarray,
 ) -> tuple:
     """Everything that reads the render: R (estimated when None), the path, its Gaussians in order
-    and their centres lightly smoothed. Returns (radius, estimated, trace, pixel_path (user's
-    direction), path_ids, points)."""
+    and their centres lightly smoothed. Returns (radius, estimated, whether the layers behind could
+    change the result, trace, pixel_path (user's direction), path_ids, points)."""
     index, depth, opacity, work, flip = _search_inputs(partial.result, stroke)
     focal = float(camera.fx)
     region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed, "behind": partial.behind_arrays()}
     clock = time.perf_counter()
-    estimated = radius is None
+    estimated, estimate_wants = radius is None, False
     if radius is None:
         try:
-            radius = float(_core.estimate_radius(index, depth, opacity, work, focal, float(band_px or 0.0), **region))
+            radius, estimate_wants = _core.estimate_radius(
+                index, depth, opacity, work, focal, float(band_px or 0.0), **region
+            )
         except PathNotFoundError as err:
             raise _failure(str(err), stroke, []) from None
         timings["estimate_radius"] = time.perf_counter() - clock
@@ -454,7 +456,7 @@ def _trace(
         radius = found / 4
         trace, pixel_path, path_ids, points = trace_path(radius)
     timings["path_search"] = time.perf_counter() - clock
-    return radius, estimated, trace, pixel_path, path_ids, points
+    return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
 
 
 def _near_their_pixels(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
@@ -539,4 +541,4 @@ def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, ba
     width of the surface across the stroke, where it stays solid (alpha >= 0.5) and its depth does
     not jump, in world units at its depth; the median over the stroke's samples on the object."""
     index, depth, opacity, work, _ = _search_inputs(render, _check_stroke(stroke))
-    return float(_core.estimate_radius(index, depth, opacity, work, float(camera.fx), float(band_px or 0.0)))
+    return float(_core.estimate_radius(index, depth, opacity, work, float(camera.fx), float(band_px or 0.0))[0])

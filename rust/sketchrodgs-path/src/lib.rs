@@ -27,7 +27,7 @@ mod search;
 mod stroke;
 mod width;
 
-pub use radius::estimate_radius;
+pub use radius::{RadiusEstimate, estimate_radius};
 pub use search::{Piece, PieceEnd, Trace, trace_stroke};
 
 /// Things that make a trace impossible. Each names what was wrong.

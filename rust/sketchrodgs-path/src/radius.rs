@@ -6,11 +6,25 @@ use crate::stroke::{CleanStroke, clean_stroke};
 use crate::width::{Walks, median};
 use crate::{IndexImage, PathError, TraceParams};
 
+/// What [`estimate_radius`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RadiusEstimate {
+    /// `R`, in world units.
+    pub radius: f32,
+    /// The image came without the layers behind it, and with them the estimate might measure
+    /// something else (a part behind leaves rather than the leaves): give them and estimate again.
+    pub wants_behind: bool,
+}
+
 /// Estimate `R` from the object's visible width under `stroke`. `params.focal_px` must be > 0;
 /// `params.radius` is ignored. Two passes: the width under every sample gives a first `R`, with
 /// which the stroke is cleaned (`3R` depth gaps); the width at the clean chain's samples is the
 /// estimate, so samples over an occluder or past the object's end do not count.
-pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TraceParams) -> Result<f32, PathError> {
+pub fn estimate_radius(
+    image: &IndexImage,
+    stroke: &[[f32; 2]],
+    params: &TraceParams,
+) -> Result<RadiusEstimate, PathError> {
     let focal = params.focal_px;
     if !(focal.is_finite() && focal > 0.0) {
         return Err(PathError::BadParameter { name: "focal_px", value: f64::from(focal) });
@@ -25,7 +39,13 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
     let Some(rough) = first else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
     let gap = crate::depth_gap(image, stroke, rough, focal);
-    let clean = clean_stroke(image, stroke, band_px, gap, focal, None)?;
+    // Whether the chain runs behind what is in front is decided as the search decides it, with
+    // surfaces much wider than the first estimate scoring lower (docs/extraction.md, "What lies
+    // behind"): a part seen behind leaves is then measured rather than the leaves. Where it stays
+    // in front, the chain is the plain one.
+    let slender = clean_stroke(image, stroke, band_px, gap, focal, Some(rough))?;
+    let wants_behind = slender.wants_behind;
+    let clean = if slender.behind { slender } else { clean_stroke(image, stroke, band_px, gap, focal, None)? };
     // what lies more than the gap in front of the chain is seen through (as the search does)
     let rough_px = crate::depth_under(image, stroke).map_or(0.0, |z| rough * focal / z);
     let floors = clean.floors(image, gap, band_px + WALK_RADII * rough_px);
@@ -44,7 +64,8 @@ pub fn estimate_radius(image: &IndexImage, stroke: &[[f32; 2]], params: &TracePa
             under.or(Some(a).filter(|&q| image.covered(q)))
         })
         .collect();
-    Ok(half_widths(image, &clean, &anchors, focal, max_px).unwrap_or(rough))
+    let radius = half_widths(image, &clean, &anchors, focal, max_px).unwrap_or(rough);
+    Ok(RadiusEstimate { radius, wants_behind })
 }
 
 /// Median half-width in world units over the samples that have a pixel.

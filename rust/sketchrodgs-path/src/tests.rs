@@ -295,10 +295,10 @@ fn the_radius_is_half_the_visible_width() {
     // The rope is 3 px thick at depth 5 with a focal length of 100: R = 1.5 px * 5 / 100.
     let scene = Synthetic::new(80, 40, FOCAL, rope);
     let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
-    let radius = estimate_radius(&scene.image(), &[[2.5, 20.5], [40.0, 21.5], [77.5, 20.5]], &params).unwrap();
+    let radius = estimate_radius(&scene.image(), &[[2.5, 20.5], [40.0, 21.5], [77.5, 20.5]], &params).unwrap().radius;
     assert!((radius - 0.075).abs() < 0.01, "R = {radius}");
     // a short stroke, two diameters long, still gives it
-    let short = estimate_radius(&scene.image(), &[[30.5, 20.5], [36.5, 20.5]], &params).unwrap();
+    let short = estimate_radius(&scene.image(), &[[30.5, 20.5], [36.5, 20.5]], &params).unwrap().radius;
     assert!((short - 0.075).abs() < 0.01, "R = {short}");
     let unknown_focal = TraceParams { focal_px: 0.0, ..params };
     assert!(matches!(
@@ -445,4 +445,17 @@ fn layers_behind_a_visible_part_change_nothing() {
         scene.image().with_behind(&behind_index[1..], &behind_depth, &behind_alpha),
         Err(PathError::BehindSize { .. })
     ));
+}
+
+#[test]
+fn the_radius_behind_a_leaf_is_the_ropes_and_asks_for_the_layers_without_them() {
+    let scene = HiddenRope::new();
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let stroke = [[2.5, 20.5], [77.5, 20.5]];
+    assert!(estimate_radius(&scene.front.image(), &stroke, &params).unwrap().wants_behind);
+    let image = scene.front.image().with_behind(&scene.behind_index, &scene.behind_depth, &scene.behind_alpha).unwrap();
+    let estimate = estimate_radius(&image, &stroke, &params).unwrap();
+    // the rope is 3 px thick at depth 5 with a focal length of 100
+    assert!(!estimate.wants_behind);
+    assert!((estimate.radius - 1.5 * 5.0 / FOCAL).abs() < 0.01, "{}", estimate.radius);
 }

@@ -134,7 +134,8 @@ pub struct Trace {
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
 /// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width;
-/// `rendered` and `missed` as for `trace_stroke`.
+/// `rendered`, `missed` and `behind` as for `trace_stroke`. Returns (R, whether the layers behind,
+/// not given, could change it).
 #[pyfunction]
 #[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None, behind = None))]
 #[allow(clippy::too_many_arguments)]
@@ -149,7 +150,7 @@ fn estimate_radius<'py>(
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
     behind: Option<BehindArgs<'py>>,
-) -> PyResult<f32> {
+) -> PyResult<(f32, bool)> {
     let (index, depth, alpha, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
     let (height, width) = (index.shape()[0], index.shape()[1]);
@@ -169,9 +170,10 @@ fn estimate_radius<'py>(
     let params = TraceParams { band_px, focal_px, ..TraceParams::default() };
     let region = RegionArgs::new(rendered.as_ref(), missed.as_ref(), width, height)?;
     let image = region.attach(image)?;
-    let radius = run_parallel(py, "estimate_radius", || sketchrodgs_path::estimate_radius(&image, stroke, &params));
+    let estimate = run_parallel(py, "estimate_radius", || sketchrodgs_path::estimate_radius(&image, stroke, &params));
     region.report()?;
-    radius?.map_err(path_err)
+    let estimate = estimate?.map_err(path_err)?;
+    Ok((estimate.radius, estimate.wants_behind))
 }
 
 /// The layers behind the image, (index, depth, alpha) each (L, H, W): int32, float32, float32
