@@ -2,7 +2,8 @@
 
 1. Speed: a rope spanning the whole image width is stroked end to end; per-stage times of
    `extract_rod` and the paper's k-NN baseline (same weight over a 3D 8-NN graph of centres).
-2. Quality on real captures: every case of tests/data/real_cases (14 slender parts, 2-3 views
+2. Strokes through leaves onto a stem behind them: the cost of rendering the layers behind.
+3. Quality on real captures: every case of tests/data/real_cases (14 slender parts, 2-3 views
    each), scored without a true axis (`sketchrodgs.realcases`): views against each other, the
    reversed stroke, 10 jittered strokes per view, the radius estimate against the measured R.
 """
@@ -16,6 +17,7 @@ import numpy as np
 
 from _table import print_table
 from sketchrodgs import Camera, realcases, synthetic
+from sketchrodgs import extract as extract_module
 from sketchrodgs.baseline import knn_path
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.render import render
@@ -140,6 +142,52 @@ def real_cases() -> None:
     )
 
 
+def behind() -> None:
+    """Strokes drawn through leaves onto a stem behind them: the layers behind are rendered and the
+    search runs again (docs/extraction.md, "What lies behind"); against the same strokes with no
+    layers (the path then runs on the leaves)."""
+    scenes, cases = realcases.load_cases(Path(__file__).parent.parent / "tests" / "data" / "real_cases" / "cases.json")
+    rows = []
+    for name, view_name in (("plant_main_stem", "az315"), ("plant_side_stem_long", "az045")):
+        case = next(c for c in cases if c["name"] == name)
+        view = next(v for v in case["views"] if v["name"] == view_name)
+        scene, camera = scenes[case["scene"]], Camera.from_dict(view["camera"])
+        stroke = np.asarray(view["stroke"], np.float64)
+        images = render(scene, camera, outputs="index")
+        for given in (False, True):
+            times = {}
+            for layers in (extract_module.BEHIND_LAYERS, 0):
+                saved, extract_module.BEHIND_LAYERS = extract_module.BEHIND_LAYERS, layers
+                try:
+                    runs = []
+                    for _ in range(REPEAT):
+                        start = time.perf_counter()
+                        ex = extract_rod(scene, camera, stroke, radius=case["radius"], render=images if given else None)
+                        runs.append((time.perf_counter() - start, ex.timings.get("render", 0.0)))
+                finally:
+                    extract_module.BEHIND_LAYERS = saved
+                times[layers] = min(runs)
+            (total, rendering), (plain, _) = times[extract_module.BEHIND_LAYERS], times[0]
+            rows.append(
+                [
+                    f"{name} / {view_name}",
+                    f"{len(scene):,}",
+                    "K and Z given" if given else "band render",
+                    f"{rendering * 1e3:.1f}",
+                    f"{total * 1e3:.1f}",
+                    f"{plain * 1e3:.1f}",
+                    f"{total / plain:.2f}x",
+                ]
+            )
+    print_table(
+        f"strokes through leaves onto a stem behind them, R given ({extract_module.BEHIND_LAYERS} layers behind; "
+        f"best of {REPEAT})",
+        ["stroke", "gaussians", "input", "render ms", "total ms", "without layers ms", "ratio"],
+        rows,
+    )
+
+
 if __name__ == "__main__":
     main()
+    behind()
     real_cases()

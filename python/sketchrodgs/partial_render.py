@@ -65,6 +65,7 @@ class PartialRender:
         """Render `tiles`, or take the `front` given (then `tiles` may be None)."""
         self.scene, self.camera, self.front = scene, camera, front
         self.behind: list[RenderResult] = []
+        self._stacked: tuple[list[RenderResult], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         if front is not None:
             self.tiles = np.ones(tile_grid(camera), bool)
             self.result, self.renders = front, 0
@@ -113,13 +114,15 @@ class PartialRender:
 
     def behind_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The layers behind as the path search takes them: index (L, H, W) int32, index depth
-        and solid (1 or 0) float32; None without layers."""
+        and solid (1 or 0) float32; None without layers. Stacked once per change of the layers."""
         if not self.behind:
             return None
-        index = np.stack([layer.index for layer in self.behind]).astype(np.int32, copy=False)
-        depth = np.stack([layer.index_depth for layer in self.behind]).astype(np.float32, copy=False)
-        solid = np.stack([layer.is_solid() for layer in self.behind]).astype(np.float32)
-        return index, depth, solid
+        if self._stacked is None or self._stacked[0] is not self.behind:
+            index = np.stack([layer.index for layer in self.behind]).astype(np.int32, copy=False)
+            depth = np.stack([layer.index_depth for layer in self.behind]).astype(np.float32, copy=False)
+            solid = np.stack([layer.is_solid() for layer in self.behind]).astype(np.float32)
+            self._stacked = (self.behind, (index, depth, solid))
+        return self._stacked[1]
 
 
 def _merged(old: RenderResult, part: RenderResult, pixels: np.ndarray) -> RenderResult:

@@ -269,7 +269,8 @@ impl TileState {
     }
 
     /// After `reset`: each pixel blends only Gaussians deeper than its entry of `near` (the
-    /// image's, `width` wide) and never starts where that is infinite. Returns the live count.
+    /// image's, `width` wide) and never starts where that is infinite. Returns the live count and
+    /// the smallest entry of a live pixel: no Gaussian at or in front of it blends in this tile.
     fn start_behind(
         &mut self,
         near: &[f32],
@@ -278,20 +279,21 @@ impl TileState {
         row0: usize,
         cols: usize,
         rows: usize,
-    ) -> usize {
-        let mut live = 0;
+    ) -> (usize, f32) {
+        let (mut live, mut nearest) = (0, f32::INFINITY);
         for y in 0..rows {
             let row = &near[(row0 + y) * width + col0..][..cols];
             self.near[y][..cols].copy_from_slice(row);
-            for (x, z) in row.iter().enumerate() {
-                if *z == f32::INFINITY {
+            for (x, &z) in row.iter().enumerate() {
+                if z == f32::INFINITY {
                     self.live[y] &= !(1 << x);
                 } else {
                     live += 1;
+                    nearest = nearest.min(z);
                 }
             }
         }
-        live
+        (live, nearest)
     }
 }
 
@@ -312,8 +314,10 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
         let col0 = tile_x * TILE;
         let cols = TILE.min(width - col0);
         let mut live = state.reset(cols, rows);
+        // Gaussians at or in front of this depth blend at no pixel of the tile (layers behind)
+        let mut in_front = f32::NEG_INFINITY;
         if SOLID && let Some(near) = near {
-            live = state.start_behind(near, width, col0, row0, cols, rows);
+            (live, in_front) = state.start_behind(near, width, col0, row0, cols, rows);
         }
         'lists: for list in source.lists(tile) {
             for batch in list.chunks(BATCH) {
@@ -323,6 +327,9 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
                     *dst = source.splat(id);
                 }
                 for (g, &id) in fetched.iter().zip(batch) {
+                    if SOLID && g.depth <= in_front {
+                        continue;
+                    }
                     live = live.saturating_sub(blend::<COLOR, SOLID, V>(&mut state, g, id, col0, row0));
                     if live == 0 {
                         break 'lists;
