@@ -48,7 +48,7 @@ def band_tiles(camera: Camera, stroke: np.ndarray, reach_px: float) -> np.ndarra
 
 class PartialRender:
     """Render of K, Z and solid (`outputs=SOLID_OUTPUTS`) of some tiles of `camera`'s image, and
-    on demand of the depth layers behind them (`render_behind`), grown on demand.
+    when asked, of the depth layers behind them (`render_behind`); both grown by the tiles asked for.
 
     Attributes:
         tiles: (rows, cols) bool, the tiles where `result` and `behind` are rendered (with a front
@@ -77,8 +77,8 @@ class PartialRender:
 
     def add_behind(self, count: int, tiles: np.ndarray) -> None:
         """Render `count` layers behind the front (each `GAP_PX` pixels' world size behind the
-        last) of the rendered tiles among `tiles`; with a front given, of `tiles`, which then become
-        the rendered tiles."""
+        last) of the rendered tiles; with a front given, of `tiles`, which then become the rendered
+        tiles."""
         if self.front is not None:
             self.tiles = np.ascontiguousarray(tiles, bool)
         self.behind = self._behind(self.result, count, self.tiles)

@@ -146,7 +146,7 @@ def render_behind(
         raise SketchRodGSError(
             f"near: expected a ({camera.height}, {camera.width}) array of depths, got {near.dtype} {near.shape}"
         )
-    if not (isinstance(count, (int, np.integer)) and 0 <= count <= 64):
+    if isinstance(count, bool) or not (isinstance(count, (int, np.integer)) and 0 <= count <= 64):
         raise SketchRodGSError(f"count: expected a whole number of layers in 0..64, got {count!r}")
     tiles = _check_tiles(tiles, camera)
     raws = _core.rasterize_behind(*_core_inputs(scene, camera), np.ascontiguousarray(near, np.float32), int(count),

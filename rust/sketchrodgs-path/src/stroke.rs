@@ -162,11 +162,8 @@ pub(crate) fn clean_stroke(
         if score > front_score * (1.0 + BEHIND_GAIN) {
             // the object is seen at the chain's ends: a part running behind something there is
             // most often one joining it (a branch behind its trunk)
-            let hidden = |&(i, z, pixel): &(usize, f32, usize)| {
-                candidates[i].iter().any(|c| c.pixel == pixel && c.depth == z && c.layer > 0)
-            };
-            let first = all.iter().position(|m| !hidden(m));
-            let last = all.iter().rposition(|m| !hidden(m));
+            let first = all.iter().position(|m| m.1.layer == 0);
+            let last = all.iter().rposition(|m| m.1.layer == 0);
             if let (Some(first), Some(last)) = (first, last) {
                 (chain, behind) = (all[first..=last].to_vec(), true);
             }
@@ -189,14 +186,15 @@ pub(crate) fn clean_stroke(
     let mut depth = vec![0.0; last - first + 1];
     let mut anchor = vec![None; last - first + 1];
     for pair in chain.windows(2) {
-        let ((i, zi, _), (j, zj, _)) = (pair[0], pair[1]);
+        let ((i, a), (j, b)) = (pair[0], pair[1]);
+        let (zi, zj) = (a.depth, b.depth);
         for k in i..=j {
             let t = if arc[j] > arc[i] { (arc[k] - arc[i]) / (arc[j] - arc[i]) } else { 0.0 };
             depth[k - first] = zi + t * (zj - zi);
         }
     }
-    for &(i, _, pixel) in &chain {
-        anchor[i - first] = Some(pixel);
+    for &(i, surface) in &chain {
+        anchor[i - first] = Some(surface.pixel);
     }
     let arc = arc[first..=last].iter().map(|s| s - arc[first]).collect();
     Ok(CleanStroke {
@@ -316,7 +314,7 @@ fn surfaces_near(
             Some(s) if s.4 == layer && z - pixels[i - 1].0 <= split => {
                 s.2 += 1;
                 if d < s.1 {
-                    (s.0, s.1, s.3, s.4) = (z, d, p, layer);
+                    (s.0, s.1, s.3) = (z, d, p);
                 }
             }
             _ => surfaces.push((z, d, 1, p, layer)),
@@ -357,7 +355,7 @@ pub(crate) fn ordered_bits(z: f32) -> u32 {
     if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
 }
 
-/// The chain of (sample, depth, pixel) with the largest total score (returned with it) whose consecutive members agree in
+/// The chain of (sample, surface) with the largest total score (returned with it) whose consecutive members agree in
 /// depth: `|dz| <= depth_gap + DEPTH_SLOPE * lateral`, lateral being the stroke length between them
 /// at that depth. Exact dynamic programming over all pairs (the stroke has a few hundred samples).
 /// Each node's best predecessor is the first compatible one in order of falling score: along a
@@ -367,7 +365,7 @@ fn depth_chain(
     arc: &[f32],
     depth_gap: f32,
     focal_px: f32,
-) -> (Vec<(usize, f32, usize)>, f32) {
+) -> (Vec<(usize, Candidate)>, f32) {
     let nodes: Vec<(usize, Candidate)> =
         candidates.iter().enumerate().flat_map(|(i, c)| c.iter().map(move |&c| (i, c))).collect();
     // lateral distance per pixel of arc is depth / focal (none when the focal length is unknown)
@@ -394,10 +392,10 @@ fn depth_chain(
         return (Vec::new(), 0.0);
     };
     let total = best[node];
-    let mut chain = vec![(nodes[node].0, nodes[node].1.depth, nodes[node].1.pixel)];
+    let mut chain = vec![nodes[node]];
     while previous[node] != usize::MAX {
         node = previous[node];
-        chain.push((nodes[node].0, nodes[node].1.depth, nodes[node].1.pixel));
+        chain.push(nodes[node]);
     }
     chain.reverse();
     (chain, total)
