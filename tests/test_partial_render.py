@@ -166,6 +166,10 @@ def test_layers_behind_are_what_lies_deeper_than_the_layer_before():
         render_behind(scene, camera, near[1:], 1)
     with pytest.raises(SketchRodGSError, match="count"):
         render_behind(scene, camera, near, -1)
+    with pytest.raises(SketchRodGSError, match="gap_px"):
+        render_behind(scene, camera, near, 1, gap_px=float("nan"))
+    with pytest.raises(SketchRodGSError, match="near"):
+        render_behind(scene, camera, np.full_like(near, np.nan), 1)
 
 
 def _main_stem_views():
