@@ -313,9 +313,11 @@ def extract_rod(
     # The band's tiles (unless the render was given), and where the search asks for them, the
     # layers behind them.
     band = band_px if band_px is not None else 0.01 * camera.width
-    partial = PartialRender(
-        scene, camera, None if given else band_tiles(camera, stroke, band + MARGIN_PX), front=render
-    )
+
+    def band_of_stroke() -> np.ndarray:  # computed only when needed: ~7 ms for a long stroke
+        return band_tiles(camera, stroke, band + MARGIN_PX)
+
+    partial = PartialRender(scene, camera, None if given else band_of_stroke(), front=render)
     render_s = time.perf_counter() - clock
     layered = False
     while True:
@@ -334,7 +336,7 @@ def extract_rod(
         if missed.any():
             partial.add(missed)
         elif wants_behind and not layered:
-            partial.add_behind(BEHIND_LAYERS, band_tiles(camera, stroke, band + MARGIN_PX))
+            partial.add_behind(BEHIND_LAYERS, band_of_stroke())
             layered = True
         else:
             break

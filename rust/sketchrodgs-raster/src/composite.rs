@@ -85,7 +85,7 @@ pub fn composite_behind<S: Source>(
 ) -> Result<RenderOutput, RasterError> {
     let options = RenderOptions { mode: RenderMode::IndexSolid, ..RenderOptions::default() };
     let mut out = blank(camera, &options)?;
-    composite_all(Simd::detect(), &mut out, camera, source, &options, mask, Some(near));
+    composite_with(Simd::detect(), &mut out, camera, source, &options, mask, Some(near));
     Ok(out)
 }
 
@@ -127,24 +127,13 @@ pub fn composite_into<S: Source>(
     options: &RenderOptions,
     mask: Option<&TileMask>,
 ) {
-    composite_with(Simd::detect(), out, camera, source, options, mask);
+    composite_with(Simd::detect(), out, camera, source, options, mask, None);
 }
 
-/// [`composite_into`] with the lane width `simd` (which the CPU must have: from `Simd::detect`).
+/// [`composite_into`] with the lane width `simd` (which the CPU must have: from `Simd::detect`);
+/// with `near` (only in [`RenderMode::IndexSolid`]) each pixel takes only the Gaussians deeper
+/// than its entry.
 pub(crate) fn composite_with<S: Source>(
-    simd: Simd,
-    out: &mut RenderOutput,
-    camera: &Camera,
-    source: &S,
-    options: &RenderOptions,
-    mask: Option<&TileMask>,
-) {
-    composite_all(simd, out, camera, source, options, mask, None);
-}
-
-/// Blends into `out`; with `near` (only in [`RenderMode::IndexSolid`]) each pixel takes only the
-/// Gaussians deeper than its entry.
-fn composite_all<S: Source>(
     simd: Simd,
     out: &mut RenderOutput,
     camera: &Camera,

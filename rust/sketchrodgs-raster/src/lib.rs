@@ -312,12 +312,35 @@ pub fn rasterize_tiles(
     options: &RenderOptions,
     tiles: &TileMask,
 ) -> Result<RenderOutput, RasterError> {
+    check_tile_grid(camera, tiles)?;
+    render(splats, camera, options, Some(tiles))
+}
+
+/// An error unless `tiles` is a mask over `camera`'s grid of tiles.
+fn check_tile_grid(camera: &Camera, tiles: &TileMask) -> Result<(), RasterError> {
     let (grid_x, grid_y) = camera.tile_grid();
     if tiles.grid() != (grid_x as usize, grid_y as usize) {
         let (x, y) = tiles.grid();
         return Err(RasterError::LengthMismatch { name: "tiles", expected: (grid_x * grid_y) as usize, got: x * y });
     }
-    render(splats, camera, options, Some(tiles))
+    Ok(())
+}
+
+/// The visible Gaussians' count and their per-tile lists, front to back (the tiles of `tiles`
+/// only, when given); an error past `MAX_TILE_PAIRS`.
+fn sort_and_bin(
+    camera: &Camera,
+    projected: &project::Projected,
+    tiles: Option<&TileMask>,
+) -> Result<(usize, bin::TileBins), RasterError> {
+    let order = bin::sort_by_depth(projected);
+    // every non-empty rectangle is in `order`: sum in row order (sequential reads, parallel)
+    let n_pairs: usize =
+        projected.rects.par_iter().with_min_len(project::MIN_GAUSSIANS_PER_TASK).map(|r| r.area()).sum();
+    if n_pairs > MAX_TILE_PAIRS {
+        return Err(RasterError::TooManyTilePairs(n_pairs));
+    }
+    Ok((order.len(), bin::TileBins::new(camera, &projected.rects, &order, tiles)?))
 }
 
 /// Depth layers behind `near` (camera z per pixel, row-major (H * W)), in
@@ -342,24 +365,10 @@ pub fn rasterize_behind(
         return Err(RasterError::LengthMismatch { name: "near", expected: pixels, got: near.len() });
     }
     if let Some(tiles) = tiles {
-        let (grid_x, grid_y) = camera.tile_grid();
-        if tiles.grid() != (grid_x as usize, grid_y as usize) {
-            let (x, y) = tiles.grid();
-            return Err(RasterError::LengthMismatch {
-                name: "tiles",
-                expected: (grid_x * grid_y) as usize,
-                got: x * y,
-            });
-        }
+        check_tile_grid(camera, tiles)?;
     }
     let projected = project::project(splats, camera, false, tiles);
-    let order = bin::sort_by_depth(&projected);
-    let n_pairs: usize =
-        projected.rects.par_iter().with_min_len(project::MIN_GAUSSIANS_PER_TASK).map(|r| r.area()).sum();
-    if n_pairs > MAX_TILE_PAIRS {
-        return Err(RasterError::TooManyTilePairs(n_pairs));
-    }
-    let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles)?;
+    let (_, bins) = sort_and_bin(camera, &projected, tiles)?;
     let source = composite::Binned { projected: &projected, bins: &bins };
     let step = 1.0 + gap_px / camera.fx as f32;
     let mut layers: Vec<RenderOutput> = Vec::with_capacity(count);
@@ -389,21 +398,14 @@ fn render(
     let start = Instant::now();
     let projected = project::project(splats, camera, with_color, tiles);
     let projected_at = Instant::now();
-    let order = bin::sort_by_depth(&projected);
-    // every non-empty rectangle is in `order`: sum in row order (sequential reads, parallel)
-    let n_pairs: usize =
-        projected.rects.par_iter().with_min_len(project::MIN_GAUSSIANS_PER_TASK).map(|r| r.area()).sum();
-    if n_pairs > MAX_TILE_PAIRS {
-        return Err(RasterError::TooManyTilePairs(n_pairs));
-    }
-    let bins = bin::TileBins::new(camera, &projected.rects, &order, tiles)?;
+    let (n_visible, bins) = sort_and_bin(camera, &projected, tiles)?;
     let sorted_at = Instant::now();
     let mut out =
         composite::composite(camera, &composite::Binned { projected: &projected, bins: &bins }, options, tiles)?;
     let end = Instant::now();
     projected.give_back();
 
-    out.n_visible = order.len();
+    out.n_visible = n_visible;
     out.n_tile_pairs = bins.len();
     out.timings = StageTimings {
         project_s: (projected_at - start).as_secs_f64(),

@@ -107,7 +107,7 @@ fn four_and_eight_lanes_blend_the_same_bits() {
         let source = Binned { projected: &projected, bins: &bins };
         let mut outs = [Simd::Four, Simd::detect()].map(|simd| {
             let mut out = blank(&cam, &options).unwrap();
-            composite_with(simd, &mut out, &cam, &source, &options, None);
+            composite_with(simd, &mut out, &cam, &source, &options, None, None);
             out
         });
         let [four, eight] = &mut outs;
