@@ -112,6 +112,7 @@ def real_cases() -> None:
                 f"{s.radius_spread:.2f}",
                 f"{s.jaccard:.2f}",
                 f"{s.end_gap:.2f}",
+                f"{s.fold_back:.2f}",
                 "all" if not misses else f"{len(misses)} missed",
                 f"{time.perf_counter() - start:.1f}",
             ]
@@ -121,7 +122,7 @@ def real_cases() -> None:
         f"real captures: {len(cases)} parts, distances in R (targets: views <= {t['cross_mean']} / {t['cross_max']}, "
         f"reversed <= {t['reverse_max']}, jitter <= {t['jitter_mean']} / {t['jitter_max']}, radius "
         f"{t['radius_low']}-{t['radius_high']} x R, spread <= {t['radius_spread']}, rod ends <= {t['end_gap']} short "
-        f"of the path's); {met} meet every target",
+        f"of the path's, folding back <= {t['fold_back']}); {met} meet every target",
         [
             "case",
             "views",
@@ -135,6 +136,7 @@ def real_cases() -> None:
             "R spread",
             "Jaccard",
             "end short",
+            "folds back",
             "targets",
             "s",
         ],

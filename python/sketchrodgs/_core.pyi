@@ -60,6 +60,9 @@ class Trace:
     @property
     def wants_behind(self) -> bool: ...
 
+def forward_along_stroke(
+    points: npt.NDArray[np.float32], radius_px: npt.NDArray[np.float32], stroke: npt.NDArray[np.float32]
+) -> npt.NDArray[np.bool_]: ...
 def estimate_radius(
     index: npt.NDArray[np.int32],
     depth: npt.NDArray[np.float32],

@@ -445,6 +445,7 @@ def _trace(
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
         path_ids = _near_their_pixels(trace.pieces, scene.means, camera, radius)
+        path_ids = _forward_only(path_ids, scene.means, camera, trace.clean_stroke, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
         # the zigzag before the chain is resampled by arc length.
         points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
@@ -475,6 +476,18 @@ def _near_their_pixels(pieces: list[_core.TracePiece], means: np.ndarray, camera
     reach_px = np.maximum(_NEAR_PIXEL_PX, _NEAR_PIXEL_RADII * radius * camera.fx / np.maximum(z, 1e-12))
     near = (z > 0) & (np.linalg.norm(uv - (pixels + 0.5), axis=1) <= reach_px)
     return ids[near] if near.sum() >= 2 else ids
+
+
+def _forward_only(ids: np.ndarray, means: np.ndarray, camera: Camera, stroke: np.ndarray, radius: float) -> np.ndarray:
+    """The path's Gaussians less those that go back along the cleaned stroke: where the path
+    doubles back (around a node, at a junction), its Gaussians in visiting order would fold the rod
+    onto itself (`_core.forward_along_stroke`)."""
+    uv, z = camera.project(means[ids])
+    radius_px = radius * camera.fx / np.maximum(z, 1e-12)
+    keep = _core.forward_along_stroke(
+        np.ascontiguousarray(uv, np.float32), np.ascontiguousarray(radius_px, np.float32), stroke
+    )
+    return ids[keep]
 
 
 def _search_inputs(

@@ -41,6 +41,8 @@ TARGETS = {
     # ours, not the issue's: the measures above compare rods only where they overlap, so a rod
     # cut short would meet them; each end of the rod stays this close to where its path ends
     "end_gap": 3.0,
+    # ours: no rod folds back along its stroke by more than this (a loop at a node, a hook at an end)
+    "fold_back": 2.5,
 }
 
 
@@ -90,6 +92,7 @@ class CaseScore:
     radius_spread: float
     jaccard: float
     end_gap: float
+    fold_back: float
 
     def misses(self) -> list[str]:
         """The targets this case does not meet, as readable strings (empty: all met)."""
@@ -115,6 +118,7 @@ class CaseScore:
             ),
             (f"radius spread {self.radius_spread:.2f}", self.radius_spread <= t["radius_spread"]),
             (f"rod end {self.end_gap:.2f} R short of its path's", self.end_gap <= t["end_gap"]),
+            (f"rod folds back {self.fold_back:.2f} R", self.fold_back <= t["fold_back"]),
         ]
         return [what for what, ok in checks if not ok]
 
@@ -190,6 +194,10 @@ def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
         radius_spread=max(radii) / min(radii) if radii else np.nan,
         jaccard=min(jaccards) if jaccards else np.nan,
         end_gap=max((end_gap(v.given) for v in views if v.given is not None), default=np.nan),
+        fold_back=max(
+            (fold_back(e) for v in views for e in [v.given, v.estimated, v.reversed, *v.jittered] if e is not None),
+            default=np.nan,
+        ),
     )
 
 
@@ -201,3 +209,23 @@ def end_gap(extraction: Extraction) -> float:
     path = np.concatenate([np.asarray(piece, np.float64) for piece in extraction.pixel_path])
     radius_px = extraction.radius * extraction.camera.fx / float(np.median(depth))
     return max(float(np.min(np.linalg.norm(uv - end, axis=1))) / radius_px for end in (path[0], path[-1]))
+
+
+def fold_back(extraction: Extraction) -> float:
+    """How far the rod goes back along its stroke, in units of R on screen (at the polyline's median
+    depth): each projected vertex is placed at the arc length of its nearest point on the stroke,
+    and this is the largest drop below the farthest placed so far (0 for a rod that runs along the
+    stroke; a loop or a hook shows as the length it turns back)."""
+    stroke = np.asarray(extraction.stroke, np.float64)
+    if len(stroke) < 2:
+        return 0.0
+    uv, depth = extraction.camera.project(np.asarray(extraction.polyline, np.float64))
+    start, ab = stroke[:-1], np.diff(stroke, axis=0)
+    length = np.linalg.norm(ab, axis=1)
+    t = np.clip(np.einsum("pkd,kd->pk", uv[:, None] - start[None], ab) / np.maximum(length**2, 1e-12), 0.0, 1.0)
+    distance = np.linalg.norm(uv[:, None] - (start[None] + t[..., None] * ab[None]), axis=2)
+    arc = (np.concatenate([[0.0], np.cumsum(length)])[:-1][None] + t * length[None])[
+        np.arange(len(uv)), distance.argmin(axis=1)
+    ]
+    radius_px = extraction.radius * extraction.camera.fx / float(np.median(depth))
+    return float(np.max(np.maximum.accumulate(arc) - arc)) / radius_px

@@ -22,11 +22,13 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 mod band;
+mod order;
 mod radius;
 mod search;
 mod stroke;
 mod width;
 
+pub use order::forward_along_stroke;
 pub use radius::{RadiusEstimate, estimate_radius};
 pub use search::{Piece, PieceEnd, Trace, trace_stroke};
 

@@ -256,7 +256,29 @@ impl<'py> RegionArgs<'py> {
     }
 }
 
+/// Which of the path's Gaussians to keep so that none goes back along the stroke
+/// (`sketchrodgs_path::forward_along_stroke`): `points` (L, 2) float32 their centres on screen in
+/// visiting order, `radius_px` (L,) float32 R on screen at each, `stroke` (K, 2) float32 the
+/// cleaned stroke. Returns (L,) bool.
+#[pyfunction]
+fn forward_along_stroke<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    radius_px: &Bound<'py, PyArray1<f32>>,
+    stroke: &Bound<'py, PyArray2<f32>>,
+) -> PyResult<Bound<'py, PyArray1<bool>>> {
+    let (points, radius_px, stroke) = (points.try_readonly()?, radius_px.try_readonly()?, stroke.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(2)])?;
+    check_shape("radius_px", radius_px.shape(), &[Some(points.shape()[0])])?;
+    check_shape("stroke", stroke.shape(), &[None, Some(2)])?;
+    let points: &[[f32; 2]] = as_rows(contiguous(&points, "points")?);
+    let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
+    let radius_px = contiguous(&radius_px, "radius_px")?;
+    Ok(sketchrodgs_path::forward_along_stroke(points, radius_px, stroke).into_pyarray(py))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(forward_along_stroke, m)?)?;
     m.add_function(wrap_pyfunction!(trace_stroke, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_radius, m)?)?;
     m.add_class::<Trace>()?;

@@ -1,0 +1,96 @@
+//! The path's Gaussians in order along the stroke (docs/extraction.md, "Polyline, segmentation,
+//! binding"). The search may double back (around a node, at a junction), and its Gaussians taken
+//! in visiting order would then fold the rod onto itself; those that go back are left out.
+
+/// Which of the points (the path's Gaussian centres on screen, in visiting order) to keep: each
+/// is placed at the arc length of its nearest point on `stroke`; among the stroke's stretches
+/// within its `radius_px` of the nearest, the first not more than two radii behind the farthest
+/// placed point is taken, so that a stroke crossing itself is followed through the crossing. A
+/// point placed more than its radius behind the farthest kept one is left out.
+///
+/// `points` and `radius_px` have one entry per point; non-finite points are left out. Fewer than
+/// two kept (or a stroke of fewer than two points): all are kept.
+pub fn forward_along_stroke(points: &[[f32; 2]], radius_px: &[f32], stroke: &[[f32; 2]]) -> Vec<bool> {
+    let mut keep = vec![false; points.len()];
+    if stroke.len() < 2 {
+        return vec![true; points.len()];
+    }
+    // per segment: start, direction, squared length, length, arc length at its start
+    let mut segments = Vec::with_capacity(stroke.len() - 1);
+    let mut s = 0.0_f32;
+    for w in stroke.windows(2) {
+        let ab = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
+        let length2 = ab[0] * ab[0] + ab[1] * ab[1];
+        segments.push((w[0], ab, length2, length2.sqrt(), s));
+        s += length2.sqrt();
+    }
+    // (distance, arc length) of the nearest point of each segment
+    let mut feet: Vec<(f32, f32)> = Vec::with_capacity(segments.len());
+    let mut farthest = f32::NEG_INFINITY;
+    for ((p, &r), kept) in points.iter().zip(radius_px).zip(keep.iter_mut()) {
+        if !(p[0].is_finite() && p[1].is_finite() && r.is_finite()) {
+            continue;
+        }
+        feet.clear();
+        feet.extend(segments.iter().map(|&(a, ab, length2, length, s0)| {
+            let t = if length2 > 0.0 {
+                (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / length2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = [p[0] - a[0] - t * ab[0], p[1] - a[1] - t * ab[1]];
+            ((d[0] * d[0] + d[1] * d[1]).sqrt(), s0 + t * length) // not hypot: a libm call
+        }));
+        let nearest = feet.iter().map(|f| f.0).fold(f32::INFINITY, f32::min);
+        let near = || feet.iter().filter(|f| f.0 <= nearest + r).map(|f| f.1);
+        let ahead = near().filter(|&s| s >= farthest - 2.0 * r).fold(f32::INFINITY, f32::min);
+        let placed = if ahead.is_finite() { ahead } else { near().fold(f32::INFINITY, f32::min) };
+        if placed >= farthest - r {
+            *kept = true;
+            farthest = farthest.max(placed);
+        }
+    }
+    if keep.iter().filter(|&&k| k).count() < 2 {
+        return vec![true; points.len()];
+    }
+    keep
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_that_go_back_are_left_out() {
+        let stroke = [[0.0, 0.0], [100.0, 0.0]];
+        // along, back by 10 (more than the radius 2), then on past where it was
+        let xs = [0.0, 5.0, 10.0, 15.0, 20.0, 10.0, 12.0, 21.0, 25.0, 30.0];
+        let points: Vec<[f32; 2]> = xs.iter().map(|&x| [x, 1.0]).collect();
+        let keep = forward_along_stroke(&points, &[2.0; 10], &stroke);
+        assert_eq!(keep, [true, true, true, true, true, false, false, true, true, true]);
+        // a step back within the radius is the path's zigzag, and stays
+        let points: Vec<[f32; 2]> = [0.0, 5.0, 4.0, 8.0].iter().map(|&x| [x, 0.0]).collect();
+        assert_eq!(forward_along_stroke(&points, &[2.0; 4], &stroke), [true; 4]);
+    }
+
+    #[test]
+    fn a_stroke_that_crosses_itself_is_followed_through_the_crossing() {
+        // a loop: right along y = 0, up, back left along y = 10 and down across the first stretch
+        let stroke = [[0.0, 0.0], [40.0, 0.0], [40.0, 10.0], [20.0, 10.0], [20.0, -20.0]];
+        let mut points: Vec<[f32; 2]> = (0..=40).step_by(4).map(|x| [x as f32, 0.0]).collect();
+        points.extend((0..=10).step_by(2).map(|y| [40.0, y as f32]));
+        points.extend((20..=40).rev().step_by(4).map(|x| [x as f32, 10.0]));
+        points.extend((-20..=10).rev().step_by(4).map(|y| [20.0, y as f32])); // crosses (20, 0)
+        let radius = vec![2.0; points.len()];
+        assert!(forward_along_stroke(&points, &radius, &stroke).iter().all(|&k| k));
+    }
+
+    #[test]
+    fn odd_input_keeps_what_it_can() {
+        let stroke = [[0.0, 0.0], [10.0, 0.0]];
+        assert_eq!(forward_along_stroke(&[[1.0, 0.0]], &[1.0], &stroke), [true]);
+        assert_eq!(forward_along_stroke(&[[1.0, 0.0]; 3], &[1.0; 3], &stroke[..1]), [true; 3]);
+        let keep = forward_along_stroke(&[[1.0, 0.0], [f32::NAN, 0.0], [5.0, 0.0]], &[1.0; 3], &stroke);
+        assert_eq!(keep, [true, false, true]);
+    }
+}
