@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
+from . import _core
 from . import consistency as cs
+from . import polyline as pl
 from .camera import Camera
 from .data import sample
 from .errors import PathNotFoundError
@@ -205,9 +207,8 @@ def end_gap(extraction: Extraction) -> float:
     """How far the rod stops short of its path, in units of R: the larger, over both ends of the
     pixel path, of the on-screen distance from that end to the projected polyline, with R taken
     on screen at the polyline's median depth."""
-    uv, depth = extraction.camera.project(np.asarray(extraction.polyline, np.float64))
+    uv, radius_px = _on_screen(extraction)
     path = np.concatenate([np.asarray(piece, np.float64) for piece in extraction.pixel_path])
-    radius_px = extraction.radius * extraction.camera.fx / float(np.median(depth))
     return max(float(np.min(np.linalg.norm(uv - end, axis=1))) / radius_px for end in (path[0], path[-1]))
 
 
@@ -220,13 +221,21 @@ def fold_back(extraction: Extraction) -> float:
     stroke = np.asarray(extraction.stroke, np.float64)
     if len(stroke) < 2:
         return 0.0
+    uv, radius_px = _on_screen(extraction)
+    arc = pl.arc_lengths(stroke)
+    # the nearest point on the stroke, in the image plane (z = 0); the reach takes in every vertex
+    reach = float(np.max(np.linalg.norm(uv - stroke[0], axis=1))) + arc[-1] + 1.0
+    segment, t, _ = _core.nearest_on_polyline(_in_plane(stroke), _in_plane(uv), reach)
+    placed = arc[segment] + t * np.diff(arc)[segment]
+    return float(np.max(np.maximum.accumulate(placed) - placed)) / radius_px
+
+
+def _in_plane(xy: np.ndarray) -> np.ndarray:
+    """(N, 2) pixel coordinates as (N, 3) float32 points at z = 0."""
+    return np.ascontiguousarray(np.column_stack([xy, np.zeros(len(xy))]), np.float32)
+
+
+def _on_screen(extraction: Extraction) -> tuple[np.ndarray, float]:
+    """The rod's polyline projected into its camera, and R in pixels at the polyline's median depth."""
     uv, depth = extraction.camera.project(np.asarray(extraction.polyline, np.float64))
-    start, ab = stroke[:-1], np.diff(stroke, axis=0)
-    length = np.linalg.norm(ab, axis=1)
-    t = np.clip(np.einsum("pkd,kd->pk", uv[:, None] - start[None], ab) / np.maximum(length**2, 1e-12), 0.0, 1.0)
-    distance = np.linalg.norm(uv[:, None] - (start[None] + t[..., None] * ab[None]), axis=2)
-    arc = (np.concatenate([[0.0], np.cumsum(length)])[:-1][None] + t * length[None])[
-        np.arange(len(uv)), distance.argmin(axis=1)
-    ]
-    radius_px = extraction.radius * extraction.camera.fx / float(np.median(depth))
-    return float(np.max(np.maximum.accumulate(arc) - arc)) / radius_px
+    return uv, extraction.radius * extraction.camera.fx / float(np.median(depth))

@@ -25,31 +25,30 @@ pub fn forward_along_stroke(points: &[[f32; 2]], radius_px: &[f32], stroke: &[[f
         let ab = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
         let length2 = ab[0] * ab[0] + ab[1] * ab[1];
         segments.push((w[0], ab, length2, length2.sqrt(), s));
-        s += length2.sqrt();
+        s += segments[segments.len() - 1].3;
     }
     // runs of segments with their bounding boxes: a point is measured against the segments of the
     // runs that can hold one within its radius of the nearest, not against the whole stroke
-    let boxes: Vec<[f32; 4]> = stroke
-        .windows(2)
-        .collect::<Vec<_>>()
-        .chunks(RUN)
-        .map(|run| {
-            run.iter()
-                .flat_map(|w| w.iter())
-                .fold([f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY], |b, q| {
-                    [b[0].min(q[0]), b[1].min(q[1]), b[2].max(q[0]), b[3].max(q[1])]
-                })
+    let boxes: Vec<[f32; 4]> = (0..segments.len())
+        .step_by(RUN)
+        .map(|k| {
+            let corners = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+            stroke[k..=(k + RUN).min(stroke.len() - 1)]
+                .iter()
+                .fold(corners, |b, q| [b[0].min(q[0]), b[1].min(q[1]), b[2].max(q[0]), b[3].max(q[1])])
         })
         .collect();
     // (distance, arc length) of the nearest point of each segment measured
     let mut feet: Vec<(f32, f32)> = Vec::with_capacity(segments.len());
+    let mut below = Vec::with_capacity(boxes.len()); // each run's least distance from the point
     let mut farthest = f32::NEG_INFINITY;
     for ((p, &r), kept) in points.iter().zip(radius_px).zip(keep.iter_mut()) {
         if !(p[0].is_finite() && p[1].is_finite() && r.is_finite()) {
             continue;
         }
         // the nearest segment is no further than the nearest run's first vertex
-        let (mut below, mut above) = (Vec::with_capacity(boxes.len()), f32::INFINITY);
+        below.clear();
+        let mut above = f32::INFINITY;
         for (k, b) in boxes.iter().enumerate() {
             let dx = (b[0] - p[0]).max(p[0] - b[2]).max(0.0);
             let dy = (b[1] - p[1]).max(p[1] - b[3]).max(0.0);
