@@ -35,6 +35,12 @@ const DEPTH_SLOPE: f32 = 1.0;
 /// beside it at a similar depth. Scores stay positive, so a wide stretch is still followed where
 /// nothing slender competes (a part in front of a body measures wide there).
 const WIDE_SCORE: f32 = 0.5;
+/// An end run of the chain joined to the rest by a step of over `3R` towards the camera, spanning
+/// at most this share of the chain's arc and on average at least `OCCLUDER_WIDE` radii wider than
+/// `WIDE_FROM`, is an occluder the stroke ran on past the part's end (a leaf in front of a stem at
+/// the soil); it is cut (`cut_occluder_ends`).
+const OCCLUDER_END_SHARE: f32 = 0.15;
+const OCCLUDER_WIDE: f32 = 0.5;
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -115,6 +121,8 @@ struct Candidate {
     pixel: usize,
     /// 0: visible at `pixel`; else seen only in that layer behind the front.
     layer: usize,
+    /// Radii by which the surface is wider than `WIDE_FROM` across the stroke (0..`WIDE_CAP`).
+    wide: f32,
 }
 
 /// Clip, resample, smooth, and choose the depth chain. `reach_px` is how far from a sample a
@@ -169,6 +177,7 @@ pub(crate) fn clean_stroke(
             }
         }
     }
+    cut_occluder_ends(&mut chain, &arc, depth_gap);
     // A surface behind scores at most HIDDEN_SCORE, so no chain over the layers behind scores more
     // than this bound: only a visible chain scoring clearly less than it can be beaten.
     let bound: f32 = visible.iter().map(|c| c.iter().map(|c| c.score).fold(HIDDEN_SCORE, f32::max)).sum();
@@ -206,6 +215,36 @@ pub(crate) fn clean_stroke(
         behind,
         wants_behind,
     })
+}
+
+/// Cut each end run of `chain` that `OCCLUDER_END_SHARE` and `OCCLUDER_WIDE` describe. The chain
+/// may step over `3R` in depth where it skips samples (a receding part behind an occluder), so a
+/// stroke drawn on past the part's end onto a leaf in front of it could be followed there: the rod
+/// then hooked onto the leaf (the plant's main stem at the soil). A run behind the rest, or as
+/// slender as the part, is kept: that is the part going on (a stem receding from its junction).
+fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32) {
+    let Some((first, last)) = chain.first().zip(chain.last()) else {
+        return;
+    };
+    let span = arc[last.0] - arc[first.0];
+    // the run and the member beyond the step: the run is in front of it, wide and short
+    let occluder = |run: &[(usize, Candidate)], inner: &Candidate, outer: &Candidate| {
+        let wide = run.iter().map(|m| m.1.wide).sum::<f32>() / run.len() as f32;
+        let reach = arc[run[run.len() - 1].0] - arc[run[0].0];
+        outer.depth < inner.depth && wide >= OCCLUDER_WIDE && reach <= OCCLUDER_END_SHARE * span
+    };
+    let steps: Vec<usize> =
+        (1..chain.len()).filter(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap).collect();
+    if let Some(&k) = steps.last()
+        && occluder(&chain[k..], &chain[k - 1].1, &chain[k].1)
+    {
+        chain.truncate(k);
+    }
+    if let Some(&k) = steps.first().filter(|&&k| k < chain.len())
+        && occluder(&chain[..k], &chain[k].1, &chain[k - 1].1)
+    {
+        chain.drain(..k);
+    }
 }
 
 /// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed.
@@ -344,6 +383,7 @@ fn surfaces_near(
                 score: hidden * near * (1.0 - WIDE_SCORE * wide / WIDE_CAP),
                 pixel: s.3,
                 layer: s.4,
+                wide,
             }
         })
         .collect()
@@ -450,6 +490,7 @@ mod tests {
                             score: 0.25 * (1 + next(4)) as f32,
                             pixel: i * 4 + k as usize,
                             layer: 0,
+                            wide: 0.0,
                         })
                         .collect()
                 })
@@ -459,6 +500,29 @@ mod tests {
             if candidates.iter().any(|c| !c.is_empty()) {
                 assert_eq!(chain, expected);
             }
+        }
+    }
+
+    #[test]
+    fn an_end_run_onto_a_wide_surface_in_front_is_cut_and_nothing_else() {
+        // 30 samples 3 px apart on the part at depth 1; `run` replaces the last or first few
+        let arc: Vec<f32> = (0..30).map(|i| 3.0 * i as f32).collect();
+        let member = |i: usize, depth: f32, wide: f32| (i, Candidate { depth, score: 1.0, pixel: i, layer: 0, wide });
+        let cut = |at_end: bool, count: usize, depth: f32, wide: f32| {
+            let mut chain: Vec<_> = (0..30).map(|i| member(i, 1.0, 0.0)).collect();
+            let run: Vec<usize> = if at_end { (30 - count..30).collect() } else { (0..count).collect() };
+            for i in run {
+                chain[i] = member(i, depth, wide);
+            }
+            cut_occluder_ends(&mut chain, &arc, 0.03);
+            30 - chain.len()
+        };
+        for at_end in [true, false] {
+            assert_eq!(cut(at_end, 3, 0.9, 2.0), 3, "a leaf in front, at the end: cut");
+            assert_eq!(cut(at_end, 3, 1.1, 2.0), 0, "behind: the part going on");
+            assert_eq!(cut(at_end, 3, 0.9, 0.0), 0, "as slender as the part");
+            assert_eq!(cut(at_end, 3, 0.98, 2.0), 0, "within the depth gap");
+            assert_eq!(cut(at_end, 10, 0.9, 2.0), 0, "over 15 % of the chain");
         }
     }
 }
