@@ -35,12 +35,13 @@ const DEPTH_SLOPE: f32 = 1.0;
 /// beside it at a similar depth. Scores stay positive, so a wide stretch is still followed where
 /// nothing slender competes (a part in front of a body measures wide there).
 const WIDE_SCORE: f32 = 0.5;
-/// An end run of the chain joined to the rest by a step of over `3R` towards the camera, spanning
-/// at most this share of the chain's arc and on average at least `OCCLUDER_WIDE` radii wider than
-/// `WIDE_FROM`, is an occluder the stroke ran on past the part's end (a leaf in front of a stem at
-/// the soil); it is cut (`cut_occluder_ends`).
+/// An end run of the chain in front of the rest is an occluder the stroke ran on past the part's
+/// end (`cut_occluder_ends`) if it spans at most this share of the chain's arc, lies on surfaces on
+/// average `OCCLUDER_WIDE` radii wider than `WIDE_FROM`, and is joined by a step over the depth gap
+/// or somewhere reaches `OCCLUDER_LEAF` radii wider (a leaf or body; `WIDE_CAP` is 4).
 const OCCLUDER_END_SHARE: f32 = 0.15;
 const OCCLUDER_WIDE: f32 = 0.5;
+const OCCLUDER_LEAF: f32 = 3.5;
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -217,33 +218,52 @@ pub(crate) fn clean_stroke(
     })
 }
 
-/// Cut each end run of `chain` that `OCCLUDER_END_SHARE` and `OCCLUDER_WIDE` describe. The chain
-/// may step over `3R` in depth where it skips samples (a receding part behind an occluder), so a
-/// stroke drawn on past the part's end onto a leaf in front of it could be followed there: the rod
-/// then hooked onto the leaf (the plant's main stem at the soil). A run behind the rest, or as
-/// slender as the part, is kept: that is the part going on (a stem receding from its junction).
+/// Cut the ends of `chain` that lie on an occluder the stroke ran on past the part's end (a leaf in
+/// front of a stem at the soil), which the rod would hook onto: an end run reaching more than the
+/// depth gap in front of the member before it, spanning at most `OCCLUDER_END_SHARE` of the
+/// chain's arc, on surfaces `OCCLUDER_WIDE` radii wider than the part on average, and either joined
+/// by a step over the gap (the chain may make one where it skips samples) or reaching
+/// `OCCLUDER_LEAF` somewhere (a leaf sloping back to the stem, joined without a step). A run behind
+/// the rest, or as slender as the part, is kept: that is the part going on (a stem receding from
+/// its junction, a twig into its fork).
 fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32) {
     let Some((first, last)) = chain.first().zip(chain.last()) else {
         return;
     };
-    let span = arc[last.0] - arc[first.0];
-    // the run and the member beyond the step: the run is in front of it, wide and short
-    let occluder = |run: &[(usize, Candidate)], inner: &Candidate, outer: &Candidate| {
-        let wide = run.iter().map(|m| m.1.wide).sum::<f32>() / run.len() as f32;
-        let reach = arc[run[run.len() - 1].0] - arc[run[0].0];
-        outer.depth < inner.depth && wide >= OCCLUDER_WIDE && reach <= OCCLUDER_END_SHARE * span
-    };
-    let steps: Vec<usize> =
-        (1..chain.len()).filter(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap).collect();
-    if let Some(&k) = steps.last()
-        && occluder(&chain[k..], &chain[k - 1].1, &chain[k].1)
-    {
-        chain.truncate(k);
+    let span = (arc[last.0] - arc[first.0]) * OCCLUDER_END_SHARE;
+    cut_occluder_tail(chain, arc, depth_gap, span);
+    chain.reverse();
+    cut_occluder_tail(chain, arc, depth_gap, span);
+    chain.reverse();
+}
+
+/// `cut_occluder_ends` for the last members of `chain`, in whichever direction it runs.
+fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, most_arc: f32) {
+    let n = chain.len();
+    let step = (1..n).rev().find(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap);
+    // where the last run of wide surfaces begins, stepping over up to two narrower members in it
+    let mut wide_run = None;
+    for k in (0..n).rev() {
+        if chain[k].1.wide >= OCCLUDER_WIDE {
+            wide_run = Some(k);
+        } else if wide_run.map_or(n, |w| w) - k > 2 {
+            break;
+        }
     }
-    if let Some(&k) = steps.first().filter(|&&k| k < chain.len())
-        && occluder(&chain[..k], &chain[k].1, &chain[k - 1].1)
-    {
-        chain.drain(..k);
+    for (start, stepped) in [(step, true), (wide_run, false)] {
+        let Some(k) = start.filter(|&k| k > 0) else { continue };
+        let run = &chain[k..];
+        let mean_wide = run.iter().map(|m| m.1.wide).sum::<f32>() / run.len() as f32;
+        let peak = run.iter().map(|m| m.1.wide).fold(0.0, f32::max);
+        let nearest = run.iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
+        if nearest < chain[k - 1].1.depth - depth_gap
+            && (arc[run[run.len() - 1].0] - arc[run[0].0]).abs() <= most_arc
+            && mean_wide >= OCCLUDER_WIDE
+            && (stepped || peak >= OCCLUDER_LEAF)
+        {
+            chain.truncate(k);
+            return;
+        }
     }
 }
 
@@ -505,24 +525,28 @@ mod tests {
 
     #[test]
     fn an_end_run_onto_a_wide_surface_in_front_is_cut_and_nothing_else() {
-        // 30 samples 3 px apart on the part at depth 1; `run` replaces the last or first few
+        // 30 samples 3 px apart on the part at depth 1 (depth gap 0.03); `run` replaces the last
+        // or first few members, stepping to `depth` at once or sloping to it
         let arc: Vec<f32> = (0..30).map(|i| 3.0 * i as f32).collect();
         let member = |i: usize, depth: f32, wide: f32| (i, Candidate { depth, score: 1.0, pixel: i, layer: 0, wide });
-        let cut = |at_end: bool, count: usize, depth: f32, wide: f32| {
+        let cut = |at_end: bool, count: usize, depth: f32, wide: f32, sloping: bool| {
             let mut chain: Vec<_> = (0..30).map(|i| member(i, 1.0, 0.0)).collect();
-            let run: Vec<usize> = if at_end { (30 - count..30).collect() } else { (0..count).collect() };
-            for i in run {
-                chain[i] = member(i, depth, wide);
+            for j in 0..count {
+                let i = if at_end { 30 - count + j } else { count - 1 - j }; // j-th member from the part
+                let t = if sloping { (j + 1) as f32 / count as f32 } else { 1.0 };
+                chain[i] = member(i, 1.0 + t * (depth - 1.0), wide);
             }
             cut_occluder_ends(&mut chain, &arc, 0.03);
             30 - chain.len()
         };
         for at_end in [true, false] {
-            assert_eq!(cut(at_end, 3, 0.9, 2.0), 3, "a leaf in front, at the end: cut");
-            assert_eq!(cut(at_end, 3, 1.1, 2.0), 0, "behind: the part going on");
-            assert_eq!(cut(at_end, 3, 0.9, 0.0), 0, "as slender as the part");
-            assert_eq!(cut(at_end, 3, 0.98, 2.0), 0, "within the depth gap");
-            assert_eq!(cut(at_end, 10, 0.9, 2.0), 0, "over 15 % of the chain");
+            assert_eq!(cut(at_end, 3, 0.9, 2.0, false), 3, "a step onto a wide surface in front: cut");
+            assert_eq!(cut(at_end, 4, 0.9, 4.0, true), 4, "a leaf sloping away in front: cut");
+            assert_eq!(cut(at_end, 4, 0.9, 2.0, true), 0, "sloping onto something not as wide as a leaf");
+            assert_eq!(cut(at_end, 3, 1.1, 4.0, false), 0, "behind: the part going on");
+            assert_eq!(cut(at_end, 3, 0.9, 0.0, false), 0, "as slender as the part");
+            assert_eq!(cut(at_end, 3, 0.98, 4.0, false), 0, "within the depth gap");
+            assert_eq!(cut(at_end, 10, 0.9, 4.0, false), 0, "over 15 % of the chain");
         }
     }
 }
