@@ -179,6 +179,39 @@ def test_real_ring_capture():
     assert len(ex.gaussian_ids) > 1500
 
 
+@pytest.mark.parametrize("centre_deg", range(0, 360, 45))
+def test_a_stroke_three_diameters_long_estimates_the_radius(centre_deg):
+    """Issue 14, radius: a stroke 3 diameters long on the bundled ring, anywhere around it, gives a
+    rod with R within 0.7-1.4 x the ring's visible half-width (0.047; its tube radius is about
+    0.045), and the rod lies on the ring's middle."""
+    from sketchrodgs import data
+
+    scene = load_scene(data.sample("ring"))
+    camera = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=960, height=540, fov_y_deg=40)
+    half_width, major, minor = 0.047, 0.455, 0.136
+    diameter_px = 2 * half_width * camera.fx / 1.4
+
+    def stroke(span_deg: float) -> np.ndarray:
+        theta = np.radians(np.linspace(centre_deg - span_deg / 2, centre_deg + span_deg / 2, 12))
+        return np.stack([major * np.cos(theta), minor * np.sin(theta), np.zeros_like(theta)], axis=1)
+
+    span = next(s for s in range(5, 180) if _length_px(camera, stroke(s)) >= 3 * diameter_px)
+    uv, _ = camera.project(stroke(span))
+    ex = extract_rod(scene, camera, uv)
+    assert 0.7 * half_width <= ex.radius <= 1.4 * half_width, (centre_deg, span, ex.radius)
+    # on the ring's middle: near the z = 0 plane and the ellipse through the tube's centre
+    assert np.abs(ex.polyline[:, 2]).max() < 0.5 * ex.radius
+    t = np.radians(np.arange(0, 360, 0.1))
+    ring = np.stack([major * np.cos(t), minor * np.sin(t)], axis=1)
+    off = np.linalg.norm(ex.polyline[:, None, :2] - ring[None], axis=2).min(axis=1)
+    assert off.max() < 0.5 * half_width, (centre_deg, off.max())
+
+
+def _length_px(camera: Camera, points: np.ndarray) -> float:
+    uv, _ = camera.project(points)
+    return float(np.linalg.norm(np.diff(uv, axis=0), axis=1).sum())
+
+
 def test_rod_json_round_trip(tmp_path):
     tubes = synthetic.tube_scene([synthetic.straight], radius=0.01, seed=2, clutter=0)
     ex = extract_rod(tubes.scene, CAMERA, stroke_along(tubes.axes[0]), radius=0.01)
