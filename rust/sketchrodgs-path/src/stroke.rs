@@ -230,10 +230,10 @@ fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
     let Some((first, last)) = chain.first().zip(chain.last()) else {
         return;
     };
-    let span = (arc[last.0] - arc[first.0]) * OCCLUDER_END_SHARE;
-    cut_occluder_tail(chain, arc, depth_gap, span);
+    let most_arc = (arc[last.0] - arc[first.0]) * OCCLUDER_END_SHARE;
+    cut_occluder_tail(chain, arc, depth_gap, most_arc);
     chain.reverse();
-    cut_occluder_tail(chain, arc, depth_gap, span);
+    cut_occluder_tail(chain, arc, depth_gap, most_arc);
     chain.reverse();
 }
 
@@ -241,7 +241,8 @@ fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
 fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, most_arc: f32) {
     let n = chain.len();
     let step = (1..n).rev().find(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap);
-    // where the last run of wide surfaces begins, stepping over up to two narrower members in it
+    // where the last run of wide surfaces begins (within three members of the end), stepping over up
+    // to two narrower members in it
     let mut wide_run = None;
     for k in (0..n).rev() {
         if chain[k].1.wide >= OCCLUDER_WIDE {
@@ -525,8 +526,8 @@ mod tests {
 
     #[test]
     fn an_end_run_onto_a_wide_surface_in_front_is_cut_and_nothing_else() {
-        // 30 samples 3 px apart on the part at depth 1 (depth gap 0.03); `run` replaces the last
-        // or first few members, stepping to `depth` at once or sloping to it
+        // 30 samples 3 px apart on the part at depth 1 (depth gap 0.03); the last or first `count`
+        // members are replaced by a run at `depth`, stepping to it at once or sloping to it
         let arc: Vec<f32> = (0..30).map(|i| 3.0 * i as f32).collect();
         let member = |i: usize, depth: f32, wide: f32| (i, Candidate { depth, score: 1.0, pixel: i, layer: 0, wide });
         let cut = |at_end: bool, count: usize, depth: f32, wide: f32, sloping: bool| {
