@@ -247,7 +247,7 @@ fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
     for k in (0..n).rev() {
         if chain[k].1.wide >= OCCLUDER_WIDE {
             wide_run = Some(k);
-        } else if wide_run.map_or(n, |w| w) - k > 2 {
+        } else if wide_run.unwrap_or(n) - k > 2 {
             break;
         }
     }
