@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from sketchrodgs import Camera, PathNotFoundError, SketchRodGSError, load_scene, synthetic
+from sketchrodgs import Camera, GaussianScene, PathNotFoundError, SketchRodGSError, load_scene, synthetic
 from sketchrodgs.baseline import knn_path
 from sketchrodgs.extract import Extraction, extract_rod, load_rod
 from sketchrodgs.render import render
@@ -177,6 +177,27 @@ def test_real_ring_capture():
     assert np.abs(ex.polyline[:, 2]).max() < 0.3 * ex.radius
     assert (ex.polyline[:, 1] > 0).all()
     assert len(ex.gaussian_ids) > 1500
+
+
+def test_a_bar_drawn_by_a_few_long_gaussians_is_followed_along_its_length():
+    """A flat stand leg seen edge-on is drawn by a few long Gaussians, each owning a long stretch of
+    the path far from its centre; with small ones at one end, the rod kept to those (a 3-Gaussian
+    stub, or refused as too short) until path Gaussians were judged by their distance to the path."""
+    xs = np.linspace(-0.35, 0.35, 8)
+    small = [[-0.46, 0, 0], [-0.445, 0, 0], [-0.43, 0, 0]]
+    means = np.vstack([np.column_stack([xs, np.zeros(8), np.zeros(8)]), small]).astype(np.float32)
+    scales = np.vstack([np.tile([0.04, 0.01, 0.004], (8, 1)), np.tile([0.006, 0.006, 0.004], (3, 1))])
+    n = len(means)
+    scene = GaussianScene.from_colors(
+        means, scales.astype(np.float32), np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
+        np.full(n, 0.95, np.float32), np.full((n, 3), 0.3, np.float32),
+    )  # fmt: skip
+    ends, _ = CAMERA.project(np.array([[-0.47, 0, 0], [0.43, 0, 0]]))
+    stroke = np.linspace(ends[0], ends[1], 12)
+    ex = extract_rod(scene, CAMERA, stroke, radius=0.01, render=render(scene, CAMERA, outputs="index"))
+    x = np.sort(ex.polyline[[0, -1], 0])
+    assert x[0] < -0.4 and x[1] > 0.3, x  # from the small Gaussians to the last long one's centre
+    assert np.abs(ex.polyline[:, 1:]).max() < 0.01
 
 
 @pytest.mark.parametrize("centre_deg", range(0, 360, 45))

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from . import _core
 from . import polyline as pl
@@ -30,7 +31,7 @@ from .scene_identity import SceneIdentity
 DEFAULT_SMOOTHING = 1.0  # radii (polyline.smooth_axis)
 MAX_SMOOTHING = 100.0  # far past any use: the axis is a straight line long before
 _SMALLEST = float(np.finfo(np.float32).tiny)  # lengths go to Rust as float32
-# A path Gaussian's centre must project within this many pixels, or radii, of its path pixel.
+# A path Gaussian's centre must project within this many pixels, or radii, of the path.
 _NEAR_PIXEL_PX = 3.0
 _NEAR_PIXEL_RADII = 2.0
 
@@ -444,7 +445,7 @@ def _trace(
         pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        path_ids = _near_their_pixels(trace.pieces, scene.means, camera, radius)
+        path_ids = _near_the_path(trace.pieces, scene.means, camera, radius)
         path_ids = _forward_only(path_ids, scene.means, camera, trace.clean_stroke, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
         # the zigzag before the chain is resampled by arc length.
@@ -462,19 +463,21 @@ def _trace(
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
 
 
-def _near_their_pixels(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
+def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
-    projects far from the pixel where the path met them: a big Gaussian of what the part touches
-    (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's
-    edge while its centre lies far away, and would hook the rod's end towards it."""
+    projects far from every pixel of the path: a big Gaussian of what the part touches (the guitar
+    body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's edge while its
+    centre lies far to the side, and would hook the rod's end towards it. A big Gaussian of the part
+    itself (a flat stand leg is drawn by a few) has its centre on the path, though far along it from
+    where the path first met it."""
     pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
     ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     _, first = np.unique(ids, return_index=True)
-    first = np.sort(first)  # first visit of each Gaussian, in path order
-    ids, pixels = ids[first], pixels[first]
+    ids = ids[np.sort(first)]  # first visit of each Gaussian, in path order
     uv, z = camera.project(means[ids])
     reach_px = np.maximum(_NEAR_PIXEL_PX, _NEAR_PIXEL_RADII * radius * camera.fx / np.maximum(z, 1e-12))
-    near = (z > 0) & (np.linalg.norm(uv - (pixels + 0.5), axis=1) <= reach_px)
+    off_path, _ = cKDTree(pixels + 0.5).query(np.where(np.isfinite(uv), uv, -1e9))
+    near = (z > 0) & (off_path <= reach_px)
     return ids[near] if near.sum() >= 2 else ids
 
 
