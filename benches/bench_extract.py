@@ -189,7 +189,66 @@ def behind() -> None:
     )
 
 
+def turned_views() -> None:
+    """The turned views (tests/data/real_cases/turned_views.json, `benches/turned_views.py`): each
+    case's rod seen from cameras turned about it, stroked along its projection."""
+    data = Path(__file__).parent.parent / "tests" / "data" / "real_cases"
+    scenes, cases = realcases.load_cases(data / "cases.json")
+    by_name = {case["name"]: case for case in cases}
+    turned = realcases.load_turned_views(data / "turned_views.json")
+    t = realcases.TARGETS
+    rows, totals = [], {"views": 0, "failed": 0, "radius": 0, "fold": 0}
+    for case in cases:
+        scene, views = scenes[case["scene"]], [v for v in turned if v["case"] == case["name"]]
+        sources = {}
+        for view in case["views"]:
+            if any(v["source"] == view["name"] for v in views):
+                camera = Camera.from_dict(view["camera"])
+                images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
+                stroke = np.asarray(view["stroke"], np.float64)
+                sources[view["name"]] = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+        results = [realcases.run_turned_view(scene, case, v, sources[v["source"]]) for v in views]
+        ok = [r for r in results if not r.failed]
+        seen = [r for r in ok if r.visible >= 0.8]
+        ratios = [r.radius_ratio for r in ok]
+        out = sum(not (t["radius_low"] <= x <= t["radius_high"]) for x in ratios)
+        folds = sum(r.fold_back > t["fold_back"] for r in ok)
+        totals["views"] += len(results)
+        totals["failed"] += len(results) - len(ok)
+        totals["radius"] += out
+        totals["fold"] += folds
+        rows.append(
+            [
+                case["name"],
+                f"{len(results)}",
+                f"{len(results) - len(ok)}",
+                f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "-",
+                f"{out}",
+                f"{len(seen)}",
+                f"{np.median([r.mean for r in seen]):.2f} / {max(r.max for r in seen):.2f}" if seen else "-",
+                f"{folds}",
+            ]
+        )
+    print_table(
+        f"turned views: {totals['views']} views of the 14 parts turned 20-60 degrees, stroked along the rod's "
+        f"projection; {totals['failed']} failed, {totals['radius']} estimate R outside {t['radius_low']}-"
+        f"{t['radius_high']} x R, {totals['fold']} fold back over {t['fold_back']} R",
+        [
+            "case",
+            "views",
+            "failed",
+            "R est. / R",
+            "R outside",
+            "seen >= 80 %",
+            "vs source rod: median mean / max (R)",
+            "fold back",
+        ],
+        rows,
+    )
+
+
 if __name__ == "__main__":
     main()
     behind()
     real_cases()
+    turned_views()

@@ -239,3 +239,110 @@ def _on_screen(extraction: Extraction) -> tuple[np.ndarray, float]:
     """The rod's polyline projected into its camera, and R in pixels at the polyline's median depth."""
     uv, depth = extraction.camera.project(np.asarray(extraction.polyline, np.float64))
     return uv, extraction.radius * extraction.camera.fx / float(np.median(depth))
+
+
+# ---- turned views (tests/data/real_cases/turned_views.json) ---------------------------------------
+# Each case seen from cameras turned about its rod, with strokes drawn along the rod's projection:
+# views nobody chose by hand, as a user's own would be. Made by `benches/turned_views.py`.
+
+# (name, axis, degrees): turned about the camera's up axis (yaw) or its right axis (pitch), about
+# the source rod's centre
+TURNS = (
+    ("yaw-30", "up", -30.0),
+    ("yaw+30", "up", 30.0),
+    ("yaw+60", "up", 60.0),
+    ("pitch+20", "right", 20.0),
+    ("pitch-20", "right", -20.0),
+)
+TURNED_STROKE_SPACING_PX = 25.0  # a point every this many pixels along the projected rod
+TURNED_STROKE_NOISE_PX = 2.0  # hand noise on each point (standard deviation)
+TURNED_STROKE_OVERSHOOT_PX = 10.0  # both ends run on past the rod this far
+
+
+def turned_camera(camera: Camera, centre: np.ndarray, axis: str, degrees: float, name: str = "") -> Camera:
+    """`camera` turned by `degrees` about its own `axis` ("up" or "right") through `centre`, looking
+    at `centre`, with the same image size and vertical field of view."""
+    to_world = np.asarray(camera.camera_to_world, np.float64)
+    eye, right, up = to_world[:3, 3], to_world[:3, 0], -to_world[:3, 1]
+    k = up if axis == "up" else right
+    angle = np.radians(degrees)
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    turn = np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross  # Rodrigues
+    fov = float(np.degrees(2 * np.arctan(camera.height / 2 / camera.fy)))
+    eye = centre + turn @ (eye - centre)
+    return Camera.look_at(eye, centre, up, width=camera.width, height=camera.height, fov_y_deg=fov, name=name)
+
+
+def stroke_along(camera: Camera, polyline: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A stroke a user might draw along `polyline` seen by `camera`: a point every
+    `TURNED_STROKE_SPACING_PX` of its projection with hand noise, both ends overshooting."""
+    uv, _ = camera.project(np.asarray(polyline, np.float64))
+    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(uv, axis=0), axis=1))]
+    at = np.r_[np.arange(0.0, arc[-1], TURNED_STROKE_SPACING_PX), arc[-1]]
+    points = np.column_stack([np.interp(at, arc, uv[:, 0]), np.interp(at, arc, uv[:, 1])])
+    points += rng.normal(0.0, TURNED_STROKE_NOISE_PX, points.shape)
+    out = [(points[0] - points[1]), (points[-1] - points[-2])]
+    out = [d / max(float(np.linalg.norm(d)), 1e-9) * TURNED_STROKE_OVERSHOOT_PX for d in out]
+    return np.vstack([points[0] + out[0], points, points[-1] + out[1]])
+
+
+def visible_share(scene_render: Any, camera: Camera, polyline: np.ndarray, radius: float) -> float:
+    """The share of `polyline`'s vertices that `camera` sees: inside the image, on a Gaussian whose
+    depth is within `-3R..+1.5R` of the vertex's (the part's front surface, not a leaf in front)."""
+    uv, z = camera.project(np.asarray(polyline, np.float64))
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
+    col = np.clip(uv[:, 0].astype(int), 0, camera.width - 1)
+    row = np.clip(uv[:, 1].astype(int), 0, camera.height - 1)
+    seen = scene_render.index_depth[row, col]
+    on = scene_render.index[row, col] >= 0
+    return float(np.mean(inside & on & (seen > z - 3 * radius) & (seen < z + 1.5 * radius)))
+
+
+@dataclass
+class TurnedResult:
+    """One turned view extracted: R given (against the source view's rod) and R estimated."""
+
+    case: str
+    source: str
+    turn: str
+    visible: float
+    failed: str | None  # the error, where either extraction failed
+    radius_ratio: float  # estimated R / the case's R
+    mean: float  # R given, against the source view's rod, in R
+    max: float
+    fold_back: float  # the larger of the two extractions', in R on screen
+
+    @property
+    def name(self) -> str:
+        return f"{self.case}/{self.source}/{self.turn}"
+
+
+def load_turned_views(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
+    """The turned views: each with `case`, `source` (view name), `turn`, `visible`, `camera`, `stroke`."""
+    return list(json.loads(Path(path).read_text(encoding="utf-8"))["views"])
+
+
+def run_turned_view(
+    scene: GaussianScene, case: dict[str, Any], turned: dict[str, Any], source_rod: Extraction | None = None
+) -> TurnedResult:
+    """Extract one turned view with R given and estimated; `source_rod` (the source view's rod, R
+    given) is what the rod with R given is compared with (NaN without it)."""
+    radius = float(case["radius"])
+    camera = Camera.from_dict(turned["camera"], f"{case['name']}/{turned['source']}/{turned['turn']}")
+    stroke = np.asarray(turned["stroke"], np.float64)
+    images = render(scene, camera, outputs=SOLID_OUTPUTS)
+    result = TurnedResult(
+        case["name"], turned["source"], turned["turn"], float(turned["visible"]), None, np.nan, np.nan, np.nan, np.nan
+    )
+    try:
+        given = extract_rod(scene, camera, stroke, radius=radius, render=images)
+        estimated = extract_rod(scene, camera, stroke, radius=None, render=images)
+    except PathNotFoundError as err:
+        result.failed = str(err)
+        return result
+    result.radius_ratio = estimated.radius / radius
+    result.fold_back = max(fold_back(given), fold_back(estimated))
+    if source_rod is not None:
+        agreement = cs.polyline_agreement(source_rod.polyline, given.polyline, radius)
+        result.mean, result.max = agreement["mean"], agreement["max"]
+    return result

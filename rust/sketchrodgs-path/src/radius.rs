@@ -4,6 +4,11 @@
 use crate::search::WALK_RADII;
 use crate::stroke::{CleanStroke, clean_stroke};
 use crate::width::{Walks, median};
+
+/// The first radius is the median of the slender cluster of half-widths (`slender_cluster`): the
+/// lowest run of them within this factor of its least that holds at least `CLUSTER_SHARE` of them.
+const CLUSTER_RATIO: f32 = 3.0;
+const CLUSTER_SHARE: f32 = 0.2;
 use crate::{IndexImage, PathError, TraceParams};
 
 /// What [`estimate_radius`] found.
@@ -17,9 +22,10 @@ pub struct RadiusEstimate {
 }
 
 /// Estimate `R` from the object's visible width under `stroke`. `params.focal_px` must be > 0;
-/// `params.radius` is ignored. Two passes: the width under every sample gives a first `R`, with
-/// which the stroke is cleaned (`3R` depth gaps); the width at the clean chain's samples is the
-/// estimate, so samples over an occluder or past the object's end do not count.
+/// `params.radius` is ignored. Two passes: the widths under every sample give a first `R` (their
+/// slender cluster: where leaves in front cover most of the stroke, their median is a leaf's), with
+/// which the stroke is cleaned (`3R` depth gaps); the median width at the clean chain's samples is
+/// the estimate, so samples over an occluder or past the object's end do not count.
 pub fn estimate_radius(
     image: &IndexImage,
     stroke: &[[f32; 2]],
@@ -35,8 +41,8 @@ pub fn estimate_radius(
     let loose = clean_stroke(image, stroke, band_px, f32::INFINITY, 0.0, None)?;
     let under: Vec<Option<usize>> =
         loose.points.iter().map(|p| image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q))).collect();
-    let first = half_widths(image, &loose, &under, focal, max_px);
-    let Some(rough) = first else { return Err(PathError::StrokeOnBackground) };
+    let mut first = half_widths(image, &loose, &under, focal, max_px);
+    let Some(rough) = slender_cluster(&mut first) else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
     let gap = crate::depth_gap(image, stroke, rough, focal);
     // Whether the chain runs behind what is in front is decided as the search decides it, with
@@ -64,24 +70,43 @@ pub fn estimate_radius(
             under.or(Some(a).filter(|&q| image.covered(q)))
         })
         .collect();
-    let radius = half_widths(image, &clean, &anchors, focal, max_px).unwrap_or(rough);
+    let mut widths = half_widths(image, &clean, &anchors, focal, max_px);
+    let radius = if widths.is_empty() { rough } else { median(&mut widths) };
     Ok(RadiusEstimate { radius, wants_behind })
 }
 
-/// Median half-width in world units over the samples that have a pixel.
+/// The half-widths in world units at the samples that have a pixel.
 fn half_widths(
     image: &IndexImage,
     stroke: &CleanStroke,
     pixels: &[Option<usize>],
     focal: f32,
     max_px: usize,
-) -> Option<f32> {
+) -> Vec<f32> {
     let mut walks = Walks::default();
-    let mut values: Vec<f32> = pixels
+    pixels
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
         .map(|(p, &n)| 0.5 * walks.cross_width(image, p, n, focal, max_px) as f32 * image.depth(p) / focal)
-        .collect();
-    (!values.is_empty()).then(|| median(&mut values))
+        .collect()
+}
+
+/// The median of the lowest run of `values` spanning at most `CLUSTER_RATIO` (from its least) that
+/// holds `CLUSTER_SHARE` of them, at least 3: the part's widths, where wider things under the
+/// stroke (leaves over a stem, seen from below) outnumber them. The median of all where no run
+/// does; None for no values. Sorts `values`.
+fn slender_cluster(values: &mut [f32]) -> Option<f32> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f32::total_cmp);
+    let need = ((CLUSTER_SHARE * values.len() as f32).ceil() as usize).max(3);
+    for i in 0..values.len() {
+        let end = values.partition_point(|&v| v <= values[i] * CLUSTER_RATIO);
+        if values[i] > 0.0 && end - i >= need {
+            return Some(median(&mut values[i..end]));
+        }
+    }
+    Some(median(values))
 }

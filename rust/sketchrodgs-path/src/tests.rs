@@ -308,6 +308,17 @@ fn the_radius_is_half_the_visible_width() {
 }
 
 #[test]
+fn the_radius_of_a_rope_mostly_behind_a_leaf_is_the_ropes() {
+    // A leaf 21 px wide (rows 10..=30) one unit in front of the rope covers cols 20..=60, half the
+    // stroke: the median width under the stroke is the leaf's, the slender cluster the rope's.
+    let leaf = |col: usize, row: usize| ((20..=60).contains(&col) && (10..=30).contains(&row)).then_some(4.0);
+    let scene = Synthetic::new(80, 40, FOCAL, move |col, row| leaf(col, row).or_else(|| rope(col, row)));
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let radius = estimate_radius(&scene.image(), &[[2.5, 20.5], [77.5, 20.5]], &params).unwrap().radius;
+    assert!((radius - 0.075).abs() < 0.01, "R = {radius}");
+}
+
+#[test]
 fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
     // A bar 15 px wide (rows 13..=27) whose depth rises by 2 px of world size per pixel across it
     // (seen at about 63 degrees), with the centres scattered in depth by up to 12 px, in front of a
