@@ -42,6 +42,12 @@ const WIDE_SCORE: f32 = 0.5;
 const OCCLUDER_END_SHARE: f32 = 0.15;
 const OCCLUDER_WIDE: f32 = 0.5;
 const OCCLUDER_LEAF: f32 = 3.5;
+/// An end run in front on surfaces on average this many radii wider than `WIDE_FROM` is a leaf
+/// sloping away in front of the part wherever it is joined, and is cut if it spans at most
+/// `OCCLUDER_BROAD_SHARE` of the chain's arc (a stem seen from below, passing behind a leaf at its
+/// end). A twig's fork measures less than half as wide.
+const OCCLUDER_BROAD: f32 = 2.0;
+const OCCLUDER_BROAD_SHARE: f32 = 0.5;
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -223,22 +229,24 @@ pub(crate) fn clean_stroke(
 /// depth gap in front of the member before it, spanning at most `OCCLUDER_END_SHARE` of the
 /// chain's arc, on surfaces `OCCLUDER_WIDE` radii wider than the part on average, and either joined
 /// by a step over the gap (the chain may make one where it skips samples) or reaching
-/// `OCCLUDER_LEAF` somewhere (a leaf sloping back to the stem, joined without a step). A run behind
+/// `OCCLUDER_LEAF` somewhere (a leaf sloping back to the stem, joined without a step). A longer run
+/// in front, up to `OCCLUDER_BROAD_SHARE` of the arc, is cut where it is on average `OCCLUDER_BROAD`
+/// radii wider (a leaf the stem passes behind at its end, sloping towards the camera). A run behind
 /// the rest, or as slender as the part, is kept: that is the part going on (a stem receding from
 /// its junction, a twig into its fork).
 fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32) {
     let Some((first, last)) = chain.first().zip(chain.last()) else {
         return;
     };
-    let most_arc = (arc[last.0] - arc[first.0]) * OCCLUDER_END_SHARE;
-    cut_occluder_tail(chain, arc, depth_gap, most_arc);
+    let chain_arc = arc[last.0] - arc[first.0];
+    cut_occluder_tail(chain, arc, depth_gap, chain_arc);
     chain.reverse();
-    cut_occluder_tail(chain, arc, depth_gap, most_arc);
+    cut_occluder_tail(chain, arc, depth_gap, chain_arc);
     chain.reverse();
 }
 
 /// `cut_occluder_ends` for the last members of `chain`, in whichever direction it runs.
-fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, most_arc: f32) {
+fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, chain_arc: f32) {
     let n = chain.len();
     let step = (1..n).rev().find(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap);
     // where the last run of wide surfaces begins (within three members of the end), stepping over up
@@ -257,11 +265,12 @@ fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
         let mean_wide = run.iter().map(|m| m.1.wide).sum::<f32>() / run.len() as f32;
         let peak = run.iter().map(|m| m.1.wide).fold(0.0, f32::max);
         let nearest = run.iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
-        if nearest < chain[k - 1].1.depth - depth_gap
-            && (arc[run[run.len() - 1].0] - arc[run[0].0]).abs() <= most_arc
+        let span = (arc[run[run.len() - 1].0] - arc[run[0].0]).abs();
+        let leaf = span <= chain_arc * OCCLUDER_END_SHARE
             && mean_wide >= OCCLUDER_WIDE
-            && (stepped || peak >= OCCLUDER_LEAF)
-        {
+            && (stepped || peak >= OCCLUDER_LEAF);
+        let broad = span <= chain_arc * OCCLUDER_BROAD_SHARE && mean_wide >= OCCLUDER_BROAD;
+        if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad) {
             chain.truncate(k);
             return;
         }
@@ -543,11 +552,13 @@ mod tests {
         for at_end in [true, false] {
             assert_eq!(cut(at_end, 3, 0.9, 2.0, false), 3, "a step onto a wide surface in front: cut");
             assert_eq!(cut(at_end, 4, 0.9, 4.0, true), 4, "a leaf sloping away in front: cut");
-            assert_eq!(cut(at_end, 4, 0.9, 2.0, true), 0, "sloping onto something not as wide as a leaf");
+            assert_eq!(cut(at_end, 4, 0.9, 1.5, true), 0, "sloping onto something not as wide as a leaf");
             assert_eq!(cut(at_end, 3, 1.1, 4.0, false), 0, "behind: the part going on");
             assert_eq!(cut(at_end, 3, 0.9, 0.0, false), 0, "as slender as the part");
             assert_eq!(cut(at_end, 3, 0.98, 4.0, false), 0, "within the depth gap");
-            assert_eq!(cut(at_end, 10, 0.9, 4.0, false), 0, "over 15 % of the chain");
+            assert_eq!(cut(at_end, 10, 0.9, 1.5, false), 0, "over 15 % of the chain, not broad");
+            assert_eq!(cut(at_end, 10, 0.85, 3.0, true), 10, "a broad leaf over a third of the chain");
+            assert_eq!(cut(at_end, 16, 0.85, 3.0, true), 0, "a broad surface over half the chain");
         }
     }
 }
