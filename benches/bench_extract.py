@@ -194,7 +194,6 @@ def turned_views() -> None:
     case's rod seen from cameras turned about it, stroked along its projection."""
     data = Path(__file__).parent.parent / "tests" / "data" / "real_cases"
     scenes, cases = realcases.load_cases(data / "cases.json")
-    by_name = {case["name"]: case for case in cases}
     turned = realcases.load_turned_views(data / "turned_views.json")
     t = realcases.TARGETS
     rows, totals = [], {"views": 0, "failed": 0, "radius": 0, "fold": 0}

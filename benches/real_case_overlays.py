@@ -4,8 +4,11 @@ bound Gaussians (yellow), as `sketchrodgs extract --overlay` draws them, so a pe
 strokes and what extraction made of them.
 
     python benches/real_case_overlays.py OUT_DIR [--case NAME ...] [--gallery docs/gallery/real_cases.png]
+    python benches/real_case_overlays.py OUT_DIR --turned [--view CASE/SOURCE/TURN ...] [--gallery G.png]
 
-`--gallery` also writes one picture of the first view of each named case side by side.
+`--gallery` also writes one picture of the first view of each named case side by side (with
+`--turned`: of every turned view drawn). `--turned` draws the turned views
+(tests/data/real_cases/turned_views.json) with R estimated, as a user who gives no radius gets them.
 """
 
 from __future__ import annotations
@@ -22,19 +25,23 @@ from sketchrodgs.extract import extract_rod
 from sketchrodgs.images import draw_overlay, save_png
 
 CASES = Path(__file__).parent.parent / "tests" / "data" / "real_cases" / "cases.json"
+TURNED = CASES.parent / "turned_views.json"
 MARGIN_PX = 40
 ZOOM = 2
 
 
-def case_view_overlay(scene, case: dict, view: dict) -> tuple[Image.Image, str]:
+def case_view_overlay(scene, case: dict, view: dict, radius_given: bool = True) -> tuple[Image.Image, str]:
     """The cropped, zoomed overlay of one view and a one-line summary."""
     camera = Camera.from_dict(view["camera"], view["name"])
     stroke = np.asarray(view["stroke"], np.float64)
     images = render(scene, camera, background=(1.0, 1.0, 1.0))
+    label = f"{case['name']} / {view['name']}"
     try:
-        ex = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+        ex = extract_rod(scene, camera, stroke, radius=case["radius"] if radius_given else None, render=images)
         image = draw_overlay(images.rgb, camera, stroke, ex.pixel_path, ex.polyline, scene.means[ex.gaussian_ids])
         summary = f"{len(ex.polyline)} vertices, {len(ex.gaussian_ids):,} Gaussians, coverage {ex.coverage:.2f}"
+        if not radius_given:
+            label += f" (R est. {ex.radius / case['radius']:.2f} R)"
     except PathNotFoundError as err:
         image = draw_overlay(
             images.rgb, camera, stroke, getattr(err, "pixel_path", []), stops=getattr(err, "lost_at", [])
@@ -44,7 +51,7 @@ def case_view_overlay(scene, case: dict, view: dict) -> tuple[Image.Image, str]:
     high = np.minimum(stroke.max(axis=0) + MARGIN_PX, [camera.width, camera.height]).astype(int)
     crop = image.crop((*low, *high))
     crop = crop.resize((crop.width * ZOOM, crop.height * ZOOM), Image.LANCZOS)
-    ImageDraw.Draw(crop).text((4, 4), f"{case['name']} / {view['name']}", fill=(255, 255, 255))
+    ImageDraw.Draw(crop).text((4, 4), label, fill=(255, 255, 255))
     return crop, summary
 
 
@@ -53,11 +60,24 @@ def main() -> int:
     parser.add_argument("out_dir", type=Path)
     parser.add_argument("--case", action="append", help="only this case (repeatable)")
     parser.add_argument("--gallery", type=Path, help="also write the first views of these cases side by side")
+    parser.add_argument("--turned", action="store_true", help="draw the turned views, R estimated")
+    parser.add_argument("--view", action="append", help="with --turned: only this CASE/SOURCE/TURN (repeatable)")
     args = parser.parse_args()
     scenes, cases = realcases.load_cases(CASES)
     args.out_dir.mkdir(parents=True, exist_ok=True)
     tiles = []
-    for case in cases:
+    by_name = {case["name"]: case for case in cases}
+    for turned in realcases.load_turned_views(TURNED) if args.turned else []:
+        name = f"{turned['case']}/{turned['source']}/{turned['turn']}"
+        if (args.case and turned["case"] not in args.case) or (args.view and name not in args.view):
+            continue
+        case = by_name[turned["case"]]
+        view = {"name": f"{turned['source']}/{turned['turn']}", "camera": turned["camera"], "stroke": turned["stroke"]}
+        image, summary = case_view_overlay(scenes[case["scene"]], case, view, radius_given=False)
+        save_png(args.out_dir / f"{name.replace('/', '__')}.png", image)
+        print(f"{name:40s} {summary}")
+        tiles.append(image)
+    for case in cases if not args.turned else []:
         if args.case and case["name"] not in args.case:
             continue
         for i, view in enumerate(case["views"]):

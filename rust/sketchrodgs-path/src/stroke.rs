@@ -42,7 +42,7 @@ const WIDE_SCORE: f32 = 0.5;
 const OCCLUDER_END_SHARE: f32 = 0.15;
 const OCCLUDER_WIDE: f32 = 0.5;
 const OCCLUDER_LEAF: f32 = 3.5;
-/// An end run in front on surfaces on average this many radii wider than `WIDE_FROM` is a leaf
+/// An end run in front on surfaces whose median is this many radii wider than `WIDE_FROM` is a leaf
 /// sloping away in front of the part wherever it is joined, and is cut if it spans at most
 /// `OCCLUDER_BROAD_SHARE` of the chain's arc (a stem seen from below, passing behind a leaf at its
 /// end). A twig's fork measures less than half as wide.
@@ -230,7 +230,7 @@ pub(crate) fn clean_stroke(
 /// chain's arc, on surfaces `OCCLUDER_WIDE` radii wider than the part on average, and either joined
 /// by a step over the gap (the chain may make one where it skips samples) or reaching
 /// `OCCLUDER_LEAF` somewhere (a leaf sloping back to the stem, joined without a step). A longer run
-/// in front, up to `OCCLUDER_BROAD_SHARE` of the arc, is cut where it is on average `OCCLUDER_BROAD`
+/// in front, up to `OCCLUDER_BROAD_SHARE` of the arc, is cut where its median is `OCCLUDER_BROAD`
 /// radii wider (a leaf the stem passes behind at its end, sloping towards the camera). A run behind
 /// the rest, or as slender as the part, is kept: that is the part going on (a stem receding from
 /// its junction, a twig into its fork).
@@ -266,10 +266,11 @@ fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
         let peak = run.iter().map(|m| m.1.wide).fold(0.0, f32::max);
         let nearest = run.iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
         let span = (arc[run[run.len() - 1].0] - arc[run[0].0]).abs();
-        let leaf = span <= chain_arc * OCCLUDER_END_SHARE
-            && mean_wide >= OCCLUDER_WIDE
-            && (stepped || peak >= OCCLUDER_LEAF);
-        let broad = span <= chain_arc * OCCLUDER_BROAD_SHARE && mean_wide >= OCCLUDER_BROAD;
+        let leaf =
+            span <= chain_arc * OCCLUDER_END_SHARE && mean_wide >= OCCLUDER_WIDE && (stepped || peak >= OCCLUDER_LEAF);
+        let mut wides: Vec<f32> = run.iter().map(|m| m.1.wide).collect();
+        let median_wide = crate::width::median(&mut wides);
+        let broad = span <= chain_arc * OCCLUDER_BROAD_SHARE && median_wide >= OCCLUDER_BROAD;
         if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad) {
             chain.truncate(k);
             return;
