@@ -31,7 +31,6 @@ MISSES = {
         "tree_branch_tall",
     },
     "jitter": {
-        "donut_sprinkle_a",
         "donut_sprinkle_b",
         "guitar_stand_foot_front",
         "guitar_stand_leg_left",

@@ -31,9 +31,11 @@ from .scene_identity import SceneIdentity
 DEFAULT_SMOOTHING = 1.0  # radii (polyline.smooth_axis)
 MAX_SMOOTHING = 100.0  # far past any use: the axis is a straight line long before
 _SMALLEST = float(np.finfo(np.float32).tiny)  # lengths go to Rust as float32
-# A path Gaussian's centre must project within this many pixels, or radii, of the path.
+# A path Gaussian's centre must project within this many pixels, or radii, of the path; within
+# the wider reach where the nearer keeps fewer than half of what that would (`_near_the_path`).
 _NEAR_PIXEL_PX = 3.0
-_NEAR_PIXEL_RADII = 2.0
+_NEAR_PIXEL_RADII = 1.0
+_NEAR_PIXEL_RADII_WIDE = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -465,19 +467,25 @@ def _trace(
 
 def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
-    projects far from every pixel of the path: a big Gaussian of what the part touches (the guitar
-    body at a stand's foot, the icing under a sprinkle) can own a pixel at the part's edge while its
-    centre lies far to the side, and would hook the rod's end towards it. A big Gaussian of the part
-    itself (a flat stand leg is drawn by a few) has its centre on the path, though far along it from
-    where the path first met it."""
+    projects more than R (3 px at least) from every pixel of the path: a big Gaussian of what the
+    part touches (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at
+    the part's edge while its centre lies to the side, and would hook the rod's end towards it. A
+    big Gaussian of the part itself (a flat stand leg is drawn by a few) has its centre on the path,
+    though far along it from where the path first met it. Where that keeps fewer than half the
+    Gaussians within 2 R (a part of few Gaussians, a sprinkle seen edge-on), those are kept."""
     pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
     ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     _, first = np.unique(ids, return_index=True)
     ids = ids[np.sort(first)]  # first visit of each Gaussian, in path order
     uv, z = camera.project(means[ids])
-    reach_px = np.maximum(_NEAR_PIXEL_PX, _NEAR_PIXEL_RADII * radius * camera.fx / np.maximum(z, 1e-12))
+    radius_px = radius * camera.fx / np.maximum(z, 1e-12)
     off_path, _ = cKDTree(pixels + 0.5).query(np.where(np.isfinite(uv), uv, -1e9))
-    near = (z > 0) & (off_path <= reach_px)
+    near, wide = (
+        (z > 0) & (off_path <= np.maximum(_NEAR_PIXEL_PX, k * radius_px))
+        for k in (_NEAR_PIXEL_RADII, _NEAR_PIXEL_RADII_WIDE)
+    )
+    if near.sum() < max(3, 0.5 * wide.sum()):
+        near = wide
     return ids[near] if near.sum() >= 2 else ids
 
 
