@@ -1,8 +1,9 @@
 """Writes tests/data/real_cases/turned_views.json: each real case's rod (its first two views, R
 given) seen from cameras turned about it (`realcases.TURNS`), with a stroke drawn along its
 projection (`realcases.stroke_along`). Views nobody chose by hand: how extraction does where a
-user's own view would be, leaves in front included. Run again after changing the cases; the
-strokes are seeded, so the same extraction writes the same file.
+user's own view would be, leaves in front included. Run it again only when the cases change: the
+strokes are seeded, but the rods it turns come from the extraction of the day, so a rerun after
+an extraction change moves every view (and the tests' lists of misses with them).
 """
 
 from __future__ import annotations

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from . import _core
 from . import consistency as cs
@@ -26,7 +27,7 @@ from .data import sample
 from .errors import PathNotFoundError
 from .extract import Extraction, extract_rod
 from .io import load_scene
-from .render import SOLID_OUTPUTS, render
+from .render import SOLID_OUTPUTS, RenderResult, render
 from .scene import GaussianScene
 
 # The issue's targets, in units of the case's radius R.
@@ -264,12 +265,9 @@ def turned_camera(camera: Camera, centre: np.ndarray, axis: str, degrees: float,
     at `centre`, with the same image size and vertical field of view."""
     to_world = np.asarray(camera.camera_to_world, np.float64)
     eye, right, up = to_world[:3, 3], to_world[:3, 0], -to_world[:3, 1]
-    k = up if axis == "up" else right
-    angle = np.radians(degrees)
-    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    turn = np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross  # Rodrigues
+    turn = Rotation.from_rotvec((up if axis == "up" else right) * np.radians(degrees))
     fov = float(np.degrees(2 * np.arctan(camera.height / 2 / camera.fy)))
-    eye = centre + turn @ (eye - centre)
+    eye = centre + turn.apply(eye - centre)
     return Camera.look_at(eye, centre, up, width=camera.width, height=camera.height, fov_y_deg=fov, name=name)
 
 
@@ -281,12 +279,12 @@ def stroke_along(camera: Camera, polyline: np.ndarray, rng: np.random.Generator)
     at = np.r_[np.arange(0.0, arc[-1], TURNED_STROKE_SPACING_PX), arc[-1]]
     points = np.column_stack([np.interp(at, arc, uv[:, 0]), np.interp(at, arc, uv[:, 1])])
     points += rng.normal(0.0, TURNED_STROKE_NOISE_PX, points.shape)
-    out = [(points[0] - points[1]), (points[-1] - points[-2])]
-    out = [d / max(float(np.linalg.norm(d)), 1e-9) * TURNED_STROKE_OVERSHOOT_PX for d in out]
-    return np.vstack([points[0] + out[0], points, points[-1] + out[1]])
+    outward = [points[0] - points[1], points[-1] - points[-2]]
+    start, end = (d / max(float(np.linalg.norm(d)), 1e-9) * TURNED_STROKE_OVERSHOOT_PX for d in outward)
+    return np.vstack([points[0] + start, points, points[-1] + end])
 
 
-def visible_share(scene_render: Any, camera: Camera, polyline: np.ndarray, radius: float) -> float:
+def visible_share(scene_render: RenderResult, camera: Camera, polyline: np.ndarray, radius: float) -> float:
     """The share of `polyline`'s vertices that `camera` sees: inside the image, on a Gaussian whose
     depth is within `-3R..+1.5R` of the vertex's (the part's front surface, not a leaf in front)."""
     uv, z = camera.project(np.asarray(polyline, np.float64))
