@@ -6,6 +6,8 @@
 3. Quality on real captures: every case of tests/data/real_cases (14 slender parts, 2-3 views
    each), scored without a true axis (`sketchrodgs.realcases`): views against each other, the
    reversed stroke, 10 jittered strokes per view, the radius estimate against the measured R.
+4. The turned views (tests/data/real_cases/turned_views.json, 139 views nobody chose by hand):
+   failures, the radius estimate, each rod against its source view's, folding back.
 """
 
 from __future__ import annotations
