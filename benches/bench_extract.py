@@ -201,13 +201,10 @@ def turned_views() -> None:
     rows, totals = [], {"views": 0, "failed": 0, "radius": 0, "fold": 0}
     for case in cases:
         scene, views = scenes[case["scene"]], [v for v in turned if v["case"] == case["name"]]
-        sources = {}
-        for view in case["views"]:
-            if any(v["source"] == view["name"] for v in views):
-                camera = Camera.from_dict(view["camera"])
-                images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
-                stroke = np.asarray(view["stroke"], np.float64)
-                sources[view["name"]] = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+        used = {v["source"] for v in views}
+        sources = {
+            view["name"]: realcases.view_rod(scene, case, view) for view in case["views"] if view["name"] in used
+        }
         results = [realcases.run_turned_view(scene, case, v, sources[v["source"]]) for v in views]
         ok = [r for r in results if not r.failed]
         seen = [r for r in ok if r.visible >= 0.8]

@@ -68,7 +68,7 @@ def main() -> int:
     tiles = []
     by_name = {case["name"]: case for case in cases}
     for turned in realcases.load_turned_views(TURNED) if args.turned else []:
-        name = f"{turned['case']}/{turned['source']}/{turned['turn']}"
+        name = realcases.turned_view_name(turned)
         if (args.case and turned["case"] not in args.case) or (args.view and name not in args.view):
             continue
         case = by_name[turned["case"]]

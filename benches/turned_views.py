@@ -15,7 +15,6 @@ import numpy as np
 
 from sketchrodgs import Camera, realcases
 from sketchrodgs.atomic import atomic_write_text
-from sketchrodgs.extract import extract_rod
 from sketchrodgs.render import SOLID_OUTPUTS, render
 
 CASES = Path(__file__).parent.parent / "tests" / "data" / "real_cases"
@@ -32,11 +31,9 @@ def main() -> None:
         scene, radius = scenes[case["scene"]], float(case["radius"])
         for view in case["views"][:SOURCE_VIEWS]:
             camera = Camera.from_dict(view["camera"])
-            stroke = np.asarray(view["stroke"], np.float64)
-            rod = extract_rod(scene, camera, stroke, radius=radius, render=render(scene, camera, outputs=SOLID_OUTPUTS))
-            polyline = rod.polyline.astype(np.float64)
+            polyline = realcases.view_rod(scene, case, view).polyline.astype(np.float64)
             for turn, axis, degrees in realcases.TURNS:
-                name = f"{case['name']}/{view['name']}/{turn}"
+                name = realcases.turned_view_name({"case": case["name"], "source": view["name"], "turn": turn})
                 turned = realcases.turned_camera(camera, polyline.mean(axis=0), axis, degrees, name)
                 uv, _ = turned.project(polyline)
                 if np.sum(np.linalg.norm(np.diff(uv, axis=0), axis=1)) < SHORTEST_PX:

@@ -14,7 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from sketchrodgs.realcases import TARGETS, TurnedResult, load_cases, load_turned_views, run_turned_view
+from sketchrodgs.realcases import (
+    TARGETS,
+    TurnedResult,
+    load_cases,
+    load_turned_views,
+    run_turned_view,
+    turned_view_name,
+)
 
 DATA = Path(__file__).parent / "data" / "real_cases"
 TURNED = load_turned_views(DATA / "turned_views.json")
@@ -48,10 +55,6 @@ RADIUS_MISSES = {
 FOLD_MISSES = {"tree_branch_lower_left/az045/pitch+20"}
 
 
-def _name(view: dict) -> str:
-    return f"{view['case']}/{view['source']}/{view['turn']}"
-
-
 @pytest.fixture(scope="module")
 def results() -> dict[str, TurnedResult]:
     scenes, cases = load_cases(DATA / "cases.json")
@@ -59,13 +62,13 @@ def results() -> dict[str, TurnedResult]:
     out = {}
     for view in TURNED:
         case = by_name[view["case"]]
-        out[_name(view)] = run_turned_view(scenes[case["scene"]], case, view)
+        out[turned_view_name(view)] = run_turned_view(scenes[case["scene"]], case, view)
     return out
 
 
 def per_view(misses: set[str], what: str):
     """Parametrise over the turned views, strict-xfail where `what` is a measured miss."""
-    names = [_name(view) for view in TURNED]
+    names = [turned_view_name(view) for view in TURNED]
     assert misses <= set(names), misses - set(names)
     return pytest.mark.parametrize(
         "name",

@@ -312,7 +312,21 @@ class TurnedResult:
 
     @property
     def name(self) -> str:
-        return f"{self.case}/{self.source}/{self.turn}"
+        return turned_view_name({"case": self.case, "source": self.source, "turn": self.turn})
+
+
+def turned_view_name(turned: dict[str, Any]) -> str:
+    """`case/source/turn`: how a turned view is named in tests, tables and file names."""
+    return f"{turned['case']}/{turned['source']}/{turned['turn']}"
+
+
+def view_rod(scene: GaussianScene, case: dict[str, Any], view: dict[str, Any]) -> Extraction:
+    """The rod of one of `case`'s views, R given: what its turned views turn and compare with."""
+    camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
+    images = render(scene, camera, outputs=SOLID_OUTPUTS)
+    return extract_rod(
+        scene, camera, np.asarray(view["stroke"], np.float64), radius=float(case["radius"]), render=images
+    )
 
 
 def load_turned_views(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
@@ -326,7 +340,7 @@ def run_turned_view(
     """Extract one turned view with R given and estimated; `source_rod` (the source view's rod, R
     given) is what the rod with R given is compared with (NaN without it)."""
     radius = float(case["radius"])
-    camera = Camera.from_dict(turned["camera"], f"{case['name']}/{turned['source']}/{turned['turn']}")
+    camera = Camera.from_dict(turned["camera"], turned_view_name(turned))
     stroke = np.asarray(turned["stroke"], np.float64)
     images = render(scene, camera, outputs=SOLID_OUTPUTS)
     result = TurnedResult(

@@ -4,12 +4,12 @@
 use crate::search::WALK_RADII;
 use crate::stroke::{CleanStroke, clean_stroke};
 use crate::width::{Walks, median};
+use crate::{IndexImage, PathError, TraceParams};
 
 /// The first radius is the median of the slender cluster of half-widths (`slender_cluster`): the
 /// lowest run of them within this factor of its least that holds at least `CLUSTER_SHARE` of them.
 const CLUSTER_RATIO: f32 = 3.0;
 const CLUSTER_SHARE: f32 = 0.2;
-use crate::{IndexImage, PathError, TraceParams};
 
 /// What [`estimate_radius`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -9,7 +9,7 @@ use std::collections::BTreeSet;
 
 use rayon::prelude::*;
 
-use crate::width::{WIDE_CAP, Walks, normals};
+use crate::width::{WIDE_CAP, Walks, median, normals};
 use crate::{FLOOR_CELL, IndexImage, PathError};
 
 /// Spacing of the resampled stroke, in pixels.
@@ -269,7 +269,7 @@ fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
         let leaf =
             span <= chain_arc * OCCLUDER_END_SHARE && mean_wide >= OCCLUDER_WIDE && (stepped || peak >= OCCLUDER_LEAF);
         let mut wides: Vec<f32> = run.iter().map(|m| m.1.wide).collect();
-        let median_wide = crate::width::median(&mut wides);
+        let median_wide = median(&mut wides);
         let broad = span <= chain_arc * OCCLUDER_BROAD_SHARE && median_wide >= OCCLUDER_BROAD;
         if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad) {
             chain.truncate(k);
