@@ -48,6 +48,21 @@ const OCCLUDER_LEAF: f32 = 3.5;
 /// end). A twig's fork measures less than half as wide.
 const OCCLUDER_BROAD: f32 = 2.0;
 const OCCLUDER_BROAD_SHARE: f32 = 0.5;
+/// An end run that turns sharply in depth off the rest of the chain is a surface the stroke ran on
+/// past the part's end (a leaf seen edge-on, the soil, a side stem behind): a part turns that
+/// sharply only where it meets another. The turn is at the chain's farthest member (for a run
+/// towards the camera; nearest, for one away from it) within `TURN_SHARE` of the chain's arc from
+/// that end, and the farthest within the windows on both sides; the run reaches `TURN_FRONT_GAPS`
+/// depth gaps in front of it (behind it), the depth-over-stroke slopes on the two sides, taken over
+/// the run's length (`TURN_WINDOW_R` radii at least), differ by `TURN_DEG` or more, and the run is
+/// not the part (not more slender than the other side by half a radius, nor as slender and longer).
+/// Depths are a running median over `2 TURN_MEDIAN + 1` members.
+const TURN_SHARE: f32 = 0.6;
+const TURN_DEG: f32 = 60.0;
+const TURN_WINDOW_R: f32 = 4.0;
+const TURN_FRONT_GAPS: f32 = 2.0;
+const TURN_MEDIAN: usize = 2;
+const TURN_SIGNS: [f32; 2] = [1.0, -1.0];
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -184,7 +199,7 @@ pub(crate) fn clean_stroke(
             }
         }
     }
-    cut_occluder_ends(&mut chain, &arc, depth_gap);
+    cut_occluder_ends(&mut chain, &arc, depth_gap, focal_px);
     // A surface behind scores at most HIDDEN_SCORE, so no chain over the layers behind scores more
     // than this bound: only a visible chain scoring clearly less than it can be beaten.
     let bound: f32 = visible.iter().map(|c| c.iter().map(|c| c.score).fold(HIDDEN_SCORE, f32::max)).sum();
@@ -233,16 +248,113 @@ pub(crate) fn clean_stroke(
 /// in front, up to `OCCLUDER_BROAD_SHARE` of the arc, is cut where its median is `OCCLUDER_BROAD`
 /// radii wider (a leaf the stem passes behind at its end, sloping towards the camera). A run behind
 /// the rest, or as slender as the part, is kept: that is the part going on (a stem receding from
-/// its junction, a twig into its fork).
-fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32) {
+/// its junction, a twig into its fork), unless it turns off the part sharply in depth (`TURN_DEG`;
+/// `focal_px` 0 leaves that rule out).
+fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, focal_px: f32) {
     let Some((first, last)) = chain.first().zip(chain.last()) else {
         return;
     };
     let chain_arc = arc[last.0] - arc[first.0];
     cut_occluder_tail(chain, arc, depth_gap, chain_arc);
+    cut_turn_tail(chain, arc, depth_gap, chain_arc, focal_px);
     chain.reverse();
     cut_occluder_tail(chain, arc, depth_gap, chain_arc);
+    cut_turn_tail(chain, arc, depth_gap, chain_arc, focal_px);
     chain.reverse();
+}
+
+/// Least-squares slope of `depth` over the distance of `at` from `origin` (px along the stroke);
+/// None for fewer than 3 points.
+fn depth_slope(at: &[f32], depth: &[f32], origin: f32) -> Option<f32> {
+    if at.len() < 3 {
+        return None;
+    }
+    let n = at.len() as f32;
+    let xs: Vec<f32> = at.iter().map(|a| (a - origin).abs()).collect();
+    let mx = xs.iter().sum::<f32>() / n;
+    let mz = depth.iter().sum::<f32>() / n;
+    let sxx: f32 = xs.iter().map(|x| (x - mx) * (x - mx)).sum();
+    let sxz: f32 = xs.iter().zip(depth).map(|(x, z)| (x - mx) * (z - mz)).sum();
+    (sxx > 0.0).then(|| sxz / sxx)
+}
+
+/// The turn rule (`TURN_DEG`) for the last members of `chain`, towards the camera and away from it.
+fn cut_turn_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, chain_arc: f32, focal_px: f32) {
+    for sign in TURN_SIGNS {
+        cut_turn_tail_signed(chain, arc, depth_gap, chain_arc, focal_px, sign);
+    }
+}
+
+/// `cut_turn_tail` with the depths multiplied by `sign` (1: a run towards the camera; -1: away).
+fn cut_turn_tail_signed(
+    chain: &mut Vec<(usize, Candidate)>,
+    arc: &[f32],
+    depth_gap: f32,
+    chain_arc: f32,
+    focal_px: f32,
+    sign: f32,
+) {
+    let n = chain.len();
+    if n < 7 || focal_px <= 0.0 {
+        return;
+    }
+    // a single Gaussian's centre can sit a few radii off the part's axis: judge a running median
+    let depth: Vec<f32> = (0..n)
+        .map(|k| {
+            let mut near: Vec<f32> = chain[k.saturating_sub(TURN_MEDIAN)..(k + TURN_MEDIAN + 1).min(n)]
+                .iter()
+                .map(|m| sign * m.1.depth)
+                .collect();
+            median(&mut near)
+        })
+        .collect();
+    let at: Vec<f32> = chain.iter().map(|m| arc[m.0]).collect();
+    let end_arc = at[n - 1];
+    let Some(apex) = (1..n - 1)
+        .filter(|&k| (at[k] - end_arc).abs() <= chain_arc * TURN_SHARE)
+        .max_by(|&a, &b| depth[a].total_cmp(&depth[b]))
+    else {
+        return;
+    };
+    let nearest = depth[apex + 1..].iter().copied().fold(f32::INFINITY, f32::min);
+    if nearest >= depth[apex] - TURN_FRONT_GAPS * depth_gap {
+        return;
+    }
+    // Which side of the apex is the part: the more slender (by half a radius), else the longer.
+    let mean_wide = |side: &[(usize, Candidate)]| side.iter().map(|m| m.1.wide).sum::<f32>() / side.len() as f32;
+    let (run_wide, inner_wide) = (mean_wide(&chain[apex + 1..]), mean_wide(&chain[..apex]));
+    let (run_span, inner_span) = ((end_arc - at[apex]).abs(), (at[apex] - at[0]).abs());
+    if run_wide < inner_wide - 0.5 || (run_wide <= inner_wide + 0.5 && run_span > inner_span) {
+        return;
+    }
+    // the slopes are taken over the run's length on both sides (`TURN_WINDOW_R` radii at least, in
+    // pixels at the apex's depth; the gap is 3 R): a bump of a few radii in a receding part is not
+    // a turn
+    let window = (TURN_WINDOW_R * depth_gap / 3.0 * focal_px / chain[apex].1.depth).max(run_span);
+    let side = |range: std::ops::Range<usize>| {
+        let keep: Vec<usize> = range.filter(|&k| (at[k] - at[apex]).abs() <= window).collect();
+        let xs: Vec<f32> = keep.iter().map(|&k| at[k]).collect();
+        let zs: Vec<f32> = keep.iter().map(|&k| depth[k]).collect();
+        depth_slope(&xs, &zs, at[apex])
+    };
+    // the apex is the farthest member on both sides, not where the end's share happens to stop
+    let inner_max =
+        (0..apex).filter(|&k| (at[k] - at[apex]).abs() <= window).map(|k| depth[k]).fold(f32::MIN, f32::max);
+    if inner_max > depth[apex] {
+        return;
+    }
+    let (Some(before), Some(after)) = (side(0..apex + 1), side(apex..n)) else {
+        return;
+    };
+    // dz per unit of lateral distance, both taken towards the end (the slope before the apex was
+    // taken away from it)
+    let to_world = focal_px / chain[apex].1.depth;
+    let (before, after) = (-before * to_world, after * to_world);
+    let cos = (1.0 + before * after) / ((1.0 + before * before).sqrt() * (1.0 + after * after).sqrt());
+    let turn = cos.clamp(-1.0, 1.0).acos().to_degrees();
+    if after < before && turn >= TURN_DEG {
+        chain.truncate(apex + 1);
+    }
 }
 
 /// `cut_occluder_ends` for the last members of `chain`, in whichever direction it runs.
@@ -547,7 +659,7 @@ mod tests {
                 let t = if sloping { (j + 1) as f32 / count as f32 } else { 1.0 };
                 chain[i] = member(i, 1.0 + t * (depth - 1.0), wide);
             }
-            cut_occluder_ends(&mut chain, &arc, 0.03);
+            cut_occluder_ends(&mut chain, &arc, 0.03, 0.0);
             30 - chain.len()
         };
         for at_end in [true, false] {
@@ -560,6 +672,55 @@ mod tests {
             assert_eq!(cut(at_end, 10, 0.9, 1.5, false), 0, "over 15 % of the chain, not broad");
             assert_eq!(cut(at_end, 10, 0.85, 3.0, true), 10, "a broad leaf over a third of the chain");
             assert_eq!(cut(at_end, 16, 0.85, 3.0, true), 0, "a broad surface over half the chain");
+        }
+    }
+
+    #[test]
+    fn an_end_run_turning_sharply_off_the_part_is_cut_and_a_bend_or_a_bump_is_not() {
+        // Members 3 px apart, focal 1000 px at depth ~1 (a pixel is 0.001 wide there), R = 0.01
+        // (the depth gap 0.03). `profile(x)` is the depth at x px along the stroke.
+        let cut = |count: usize, profile: &dyn Fn(f32) -> f32, wide: &dyn Fn(usize) -> f32, at_end: bool| {
+            let arc: Vec<f32> = (0..count).map(|i| 3.0 * i as f32).collect();
+            let mut chain: Vec<_> = (0..count)
+                .map(|i| (i, Candidate { depth: profile(arc[i]), score: 1.0, pixel: i, layer: 0, wide: wide(i) }))
+                .collect();
+            if !at_end {
+                // the same chain drawn from the other end
+                let depths: Vec<f32> = chain.iter().rev().map(|m| m.1.depth).collect();
+                let wides: Vec<f32> = chain.iter().rev().map(|m| m.1.wide).collect();
+                for (k, m) in chain.iter_mut().enumerate() {
+                    (m.1.depth, m.1.wide) = (depths[k], wides[k]);
+                }
+            }
+            cut_occluder_ends(&mut chain, &arc, 0.03, 1000.0);
+            count - chain.len()
+        };
+        let slender = |_: usize| 0.0;
+        // receding at 45 degrees for 165 px, then 25 members (75 px, 7.5 R) back towards the camera
+        let peak = |x: f32| if x <= 165.0 { 1.0 + 0.001 * x } else { 1.165 - 0.001 * (x - 165.0) };
+        for at_end in [true, false] {
+            // (cut at the turn, within a member: the depths are judged by a running median)
+            assert!((24..=25).contains(&cut(81, &peak, &slender, at_end)), "a 90 degree turn towards the camera: cut");
+            let valley = |x: f32| 2.0 - peak(x);
+            assert!((24..=25).contains(&cut(81, &valley, &slender, at_end)), "a 90 degree turn away from it: cut");
+            // flat, then 35 degrees towards the camera over 150 px (10.5 R in front): a bend
+            let bend = |x: f32| if x <= 297.0 { 1.0 } else { 1.0 - 0.0007 * (x - 297.0) };
+            assert_eq!(cut(150, &bend, &slender, at_end), 0, "a gentle bend is the part");
+            // receding, with one centre 4 R off and a dip of 3 R
+            let bumpy = |x: f32| {
+                1.0 + 0.0005 * x
+                    + if x == 120.0 {
+                        0.04
+                    } else if (123.0..=150.0).contains(&x) {
+                        -0.03
+                    } else {
+                        0.0
+                    }
+            };
+            assert_eq!(cut(81, &bumpy, &slender, at_end), 0, "a bump is no turn");
+            // the turn again, but the run after it is slender and the longer side wide
+            let wide_before = |i: usize| if i < 55 { 3.0 } else { 0.0 };
+            assert_eq!(cut(81, &peak, &wide_before, at_end), 0, "the slender side is the part");
         }
     }
 }
