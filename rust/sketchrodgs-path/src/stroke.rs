@@ -55,7 +55,8 @@ const OCCLUDER_BROAD_SHARE: f32 = 0.5;
 /// that end, and the farthest within the windows on both sides; the run reaches `TURN_FRONT_GAPS`
 /// depth gaps in front of it (behind it), the depth-over-stroke slopes on the two sides, taken over
 /// the run's length (`TURN_WINDOW_R` radii at least), differ by `TURN_DEG` or more, and the run is
-/// not the part (not more slender than the other side by half a radius, nor as slender and longer).
+/// not the part (not more slender than the other side by `TURN_WIDER` radii on average, nor as
+/// slender and longer).
 /// Depths are a running median over `2 TURN_MEDIAN + 1` members.
 const TURN_SHARE: f32 = 0.6;
 const TURN_DEG: f32 = 60.0;
@@ -63,6 +64,7 @@ const TURN_WINDOW_R: f32 = 4.0;
 const TURN_FRONT_GAPS: f32 = 2.0;
 const TURN_MEDIAN: usize = 2;
 const TURN_SIGNS: [f32; 2] = [1.0, -1.0];
+const TURN_WIDER: f32 = 0.2;
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -320,11 +322,11 @@ fn cut_turn_tail_signed(
     if nearest >= depth[apex] - TURN_FRONT_GAPS * depth_gap {
         return;
     }
-    // Which side of the apex is the part: the more slender (by half a radius), else the longer.
+    // Which side of the apex is the part: the more slender, else the longer.
     let mean_wide = |side: &[(usize, Candidate)]| side.iter().map(|m| m.1.wide).sum::<f32>() / side.len() as f32;
     let (run_wide, inner_wide) = (mean_wide(&chain[apex + 1..]), mean_wide(&chain[..apex]));
     let (run_span, inner_span) = ((end_arc - at[apex]).abs(), (at[apex] - at[0]).abs());
-    if run_wide < inner_wide - 0.5 || (run_wide <= inner_wide + 0.5 && run_span > inner_span) {
+    if run_wide < inner_wide - TURN_WIDER || (run_wide <= inner_wide + TURN_WIDER && run_span > inner_span) {
         return;
     }
     // the slopes are taken over the run's length on both sides (`TURN_WINDOW_R` radii at least, in
