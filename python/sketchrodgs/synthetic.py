@@ -140,6 +140,31 @@ def tube_scene(
     return TubeScene(scene, axes, radius, np.concatenate(labels))
 
 
+def rope_on_floor_scene(radius: float = 0.01, *, seed: int = 0, floor_count: int = 60_000) -> TubeScene:
+    """A rope lying on a floor: a gently winding tube along x in the plane y = 0 (its axis `radius`
+    above the floor, so it touches it), on a grey floor of flat Gaussians at y = `radius`
+    (+y is down). The floor's Gaussians are labelled -1. What lies under a part at its own depth
+    (a cable on a table, a sprinkle on icing) shows no depth edge beside the part."""
+    rng = np.random.default_rng(seed)
+    arrays, axis = tube_gaussians(
+        lambda u: np.stack([-0.25 + 0.5 * u, np.zeros_like(u), 0.03 * np.sin(6 * u)], axis=1), radius, rng
+    )
+    n = floor_count
+    floor = {
+        "means": np.stack([rng.uniform(-0.4, 0.4, n), np.full(n, radius), rng.uniform(-0.3, 0.3, n)], axis=1),
+        "scales": np.stack([rng.uniform(0.3, 0.8, n), np.full(n, 0.05), rng.uniform(0.3, 0.8, n)], axis=1) * radius,
+        "quats": np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
+        "opacities": np.full(n, 0.9),
+        "colors": np.clip(np.array([0.5, 0.45, 0.4]) + rng.normal(0, 0.05, (n, 3)), 0, 1),
+    }
+    merged = {k: np.concatenate([arrays[k], floor[k]]) for k in arrays}
+    scene = GaussianScene.from_colors(
+        merged["means"], merged["scales"], merged["quats"], merged["opacities"], merged["colors"]
+    )
+    labels = np.concatenate([np.zeros(len(arrays["means"]), np.int32), np.full(n, -1, np.int32)])
+    return TubeScene(scene, [axis], radius, labels)
+
+
 # -- curves used by the tests and benchmarks (parameters in [0, 1]) -----------------------------
 
 

@@ -196,7 +196,11 @@ pub(crate) fn clean_stroke(
             // most often one joining it (a branch behind its trunk)
             let first = all.iter().position(|m| m.1.layer == 0);
             let last = all.iter().rposition(|m| m.1.layer == 0);
-            if let (Some(first), Some(last)) = (first, last) {
+            // (at two samples at least: a chain behind seen at one runs behind the part itself,
+            // as the floor under a rope lying on it, where the rope measures as wide as the floor)
+            if let (Some(first), Some(last)) = (first, last)
+                && last > first
+            {
                 (chain, behind) = (all[first..=last].to_vec(), true);
             }
         }
