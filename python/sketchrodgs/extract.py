@@ -420,8 +420,9 @@ def _trace(
     estimated, estimate_wants = radius is None, False
     if radius is None:
         try:
+            colours = _shown_colours(scene, [index, *(region["behind"][:1] if region["behind"] else [])])
             radius, estimate_wants = _core.estimate_radius(
-                index, depth, opacity, work, focal, float(band_px or 0.0), **region
+                index, depth, opacity, work, focal, float(band_px or 0.0), **region, colours=colours
             )
         except PathNotFoundError as err:
             raise _failure(str(err), stroke, []) from None
@@ -463,6 +464,19 @@ def _trace(
         trace, pixel_path, path_ids, points = trace_path(radius)
     timings["path_search"] = time.perf_counter() - clock
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
+
+
+def _shown_colours(scene: GaussianScene, index_images: list[np.ndarray]) -> np.ndarray:
+    """Each Gaussian's colour (its SH DC term) where `index_images` show it, 0 elsewhere: the radius
+    estimate reads the colours of the Gaussians under the stroke (docs/extraction.md, "A part lying
+    on a surface"), and at capture sizes all N colours cost more than the estimate itself."""
+    shown = np.zeros(len(scene), bool)
+    for image in index_images:
+        shown[image[image >= 0]] = True
+    rows = np.flatnonzero(shown)
+    table = np.zeros((len(scene), 3), np.float32)
+    table[rows] = scene.colors_of(rows)
+    return table
 
 
 def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:

@@ -102,6 +102,11 @@ class GaussianScene:
         dc = self.sh[:, 0] if self.sh_rows is None else self.sh[self.sh_rows, 0]
         return np.clip(0.5 + SH_C0 * dc, 0.0, 1.0).astype(np.float32)
 
+    def colors_of(self, rows: np.ndarray) -> np.ndarray:
+        """`colors` of the Gaussians `rows` only, (len(rows), 3) float32."""
+        dc = self.sh[rows, 0] if self.sh_rows is None else self.sh[self.sh_rows[rows], 0]
+        return np.clip(0.5 + SH_C0 * dc, 0.0, 1.0).astype(np.float32)
+
     def row_sh(self) -> np.ndarray:
         """(N, K, 3) float32 the SH coefficients of each Gaussian (a copy where rows share them)."""
         return self.sh if self.sh_rows is None else self.sh[self.sh_rows]

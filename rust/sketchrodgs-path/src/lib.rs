@@ -77,6 +77,9 @@ pub struct IndexImage<'a> {
     behind: Option<Behind<'a>>,
     /// Where the image is read from behind a depth, the depth per pixel (see [`Floor`]).
     floor: Floor<'a>,
+    /// Each Gaussian's view-independent colour (its SH DC term), if known: the radius estimate's
+    /// widths stop where the surface's colour is not the part's (docs/extraction.md, "Radius").
+    colours: Option<&'a [[f32; 3]]>,
 }
 
 /// Depth layers behind an index image, each peeled from the one before it (the renderer's
@@ -119,7 +122,17 @@ impl<'a> IndexImage<'a> {
         if width == 0 || height == 0 || pixels != Some(index.len()) || pixels != Some(depth.len()) {
             return Err(PathError::ImageSize { width, height, index: index.len(), depth: depth.len() });
         }
-        Ok(Self { width, height, index, depth, alpha: None, rendered: None, behind: None, floor: Floor::Front })
+        Ok(Self {
+            width,
+            height,
+            index,
+            depth,
+            alpha: None,
+            rendered: None,
+            behind: None,
+            floor: Floor::Front,
+            colours: None,
+        })
     }
 
     /// Add the layers behind the image: `index`, `depth` and `alpha` each hold a whole number of
@@ -131,6 +144,18 @@ impl<'a> IndexImage<'a> {
             return Err(PathError::BehindSize { pixels, index: index.len(), depth: depth.len(), alpha: alpha.len() });
         }
         Ok(Self { behind: Some(Behind { count, index, depth, alpha }), ..self })
+    }
+
+    /// Add each Gaussian's colour (indexed by Gaussian, as `index` is); a Gaussian past its end has
+    /// no colour.
+    pub fn with_colours(self, colours: &'a [[f32; 3]]) -> Self {
+        Self { colours: Some(colours), ..self }
+    }
+
+    /// The colour of the Gaussian at pixel `p`, if colours are known and there is one.
+    pub(crate) fn colour(&self, p: usize) -> Option<[f32; 3]> {
+        let colours = self.colours?;
+        colours.get(self.gaussian(p)? as usize).copied()
     }
 
     /// Whether layers behind the image are known.

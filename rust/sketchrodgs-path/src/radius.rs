@@ -10,6 +10,16 @@ use crate::{IndexImage, PathError, TraceParams};
 /// lowest run of them within this factor of its least that holds at least `CLUSTER_SHARE` of them.
 const CLUSTER_RATIO: f32 = 3.0;
 const CLUSTER_SHARE: f32 = 0.2;
+/// Where the Gaussians' colours are known, the final widths are also measured stopping where the
+/// colour is off the part's (`part_colour`: farther than `COLOUR_SPREADS` times the part's own
+/// median spread, `COLOUR_OFF_LEAST` at least), and that median is the estimate where the plain one
+/// is over `COLOUR_RATIO` times it: a part lying on a surface at its own depth (a rope on a floor,
+/// a sprinkle on icing) has no depth edge beside it, and its plain widths run on over the surface
+/// (3-7 x). Real parts' colours scatter (bark, shading), and the colour widths alone came out at
+/// 0.5-0.7 of the plain ones on a twig and a sprinkle whose plain widths are right.
+const COLOUR_SPREADS: f32 = 4.0;
+const COLOUR_RATIO: f32 = 2.0;
+const COLOUR_OFF_LEAST: f32 = 0.2;
 
 /// What [`estimate_radius`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,7 +51,7 @@ pub fn estimate_radius(
     let loose = clean_stroke(image, stroke, band_px, f32::INFINITY, 0.0, None)?;
     let under: Vec<Option<usize>> =
         loose.points.iter().map(|p| image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q))).collect();
-    let mut first = half_widths(image, &loose, &under, focal, max_px);
+    let mut first = half_widths(image, &loose, &under, focal, max_px, None);
     let Some(rough) = slender_cluster(&mut first) else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
     let gap = crate::depth_gap(image, stroke, rough, focal);
@@ -70,28 +80,60 @@ pub fn estimate_radius(
             under.or(Some(a).filter(|&q| image.covered(q)))
         })
         .collect();
-    let mut widths = half_widths(image, &clean, &anchors, focal, max_px);
-    let radius = if widths.is_empty() { rough } else { median(&mut widths) };
+    // the part's colour, where the Gaussians' colours are known: the median at the anchors
+    let colour = part_colour(image, &anchors);
+    let mut widths = half_widths(image, &clean, &anchors, focal, max_px, None);
+    let mut radius = if widths.is_empty() { rough } else { median(&mut widths) };
+    if let Some(colour) = colour {
+        let mut in_colour = half_widths(image, &clean, &anchors, focal, max_px, Some(colour));
+        let by_colour = if in_colour.is_empty() { radius } else { median(&mut in_colour) };
+        if radius > COLOUR_RATIO * by_colour {
+            radius = by_colour;
+        }
+    }
     Ok(RadiusEstimate { radius, wants_behind })
 }
 
-/// The half-widths in world units at the samples that have a pixel.
+/// The half-widths in world units at the samples that have a pixel (walks stopping where the
+/// colour is off `colour`, if given).
 fn half_widths(
     image: &IndexImage,
     stroke: &CleanStroke,
     pixels: &[Option<usize>],
     focal: f32,
     max_px: usize,
+    colour: Option<([f32; 3], f32)>,
 ) -> Vec<f32> {
     let mut walks = Walks::default();
     pixels
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
-        .map(|(p, &n)| 0.5 * walks.cross_width(image, p, n, focal, max_px) as f32 * image.depth(p) / focal)
+        .map(|(p, &n)| {
+            let width = match colour {
+                Some(colour) => walks.cross_width_in_colour(image, p, n, focal, max_px, colour),
+                None => walks.cross_width(image, p, n, focal, max_px),
+            };
+            0.5 * width as f32 * image.depth(p) / focal
+        })
         .collect()
 }
 
+/// The part's colour and how far from it a Gaussian of the part may be: the per-channel median of
+/// the colours of the Gaussians at `pixels`, and `COLOUR_SPREADS` times the median distance of
+/// those colours from it (`COLOUR_OFF_LEAST` at least); None without colours.
+fn part_colour(image: &IndexImage, pixels: &[Option<usize>]) -> Option<([f32; 3], f32)> {
+    let colours: Vec<[f32; 3]> = pixels.iter().filter_map(|p| image.colour((*p)?)).collect();
+    if colours.is_empty() {
+        return None;
+    }
+    let channel = |k: usize| median(&mut colours.iter().map(|c| c[k]).collect::<Vec<f32>>());
+    let centre = [channel(0), channel(1), channel(2)];
+    let mut off: Vec<f32> =
+        colours.iter().map(|c| c.iter().zip(&centre).map(|(a, b)| (a - b) * (a - b)).sum::<f32>().sqrt()).collect();
+    let spread = median(&mut off);
+    Some((centre, (COLOUR_SPREADS * spread).max(COLOUR_OFF_LEAST)))
+}
 /// The median of the lowest run of `values` spanning at most `CLUSTER_RATIO` (from its least) that
 /// holds `CLUSTER_SHARE` of them, at least 3: the part's widths, where wider things under the
 /// stroke (leaves over a stem, seen from below) outnumber them. The median of all where no run

@@ -134,10 +134,10 @@ pub struct Trace {
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
 /// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width;
-/// `rendered`, `missed` and `behind` as for `trace_stroke`. Returns (R, whether the layers behind,
-/// not given, could change it).
+/// `rendered`, `missed` and `behind` as for `trace_stroke`; `colours` (N, 3) float32, each
+/// Gaussian's colour, if known. Returns (R, whether the layers behind, not given, could change it).
 #[pyfunction]
-#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None, behind = None))]
+#[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None, behind = None, colours = None))]
 #[allow(clippy::too_many_arguments)]
 fn estimate_radius<'py>(
     py: Python<'py>,
@@ -150,9 +150,14 @@ fn estimate_radius<'py>(
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
     behind: Option<BehindArgs<'py>>,
+    colours: Option<Bound<'py, PyArray2<f32>>>,
 ) -> PyResult<(f32, bool)> {
     let (index, depth, alpha, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
+    let colours = colours.map(|c| c.try_readonly()).transpose()?;
+    if let Some(c) = &colours {
+        check_shape("colours", c.shape(), &[None, Some(3)])?;
+    }
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
     check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
@@ -164,6 +169,10 @@ fn estimate_radius<'py>(
     let behind = behind.map(|b| BehindArrays::read(b, height, width)).transpose()?;
     let image = match &behind {
         Some(b) => b.attach(image)?,
+        None => image,
+    };
+    let image = match &colours {
+        Some(c) => image.with_colours(as_rows(contiguous(c, "colours")?)),
         None => image,
     };
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
