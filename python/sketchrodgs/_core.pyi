@@ -73,7 +73,7 @@ def estimate_radius(
     rendered: npt.NDArray[np.bool_] | None = None,
     missed: npt.NDArray[np.bool_] | None = None,
     behind: tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]] | None = None,
-    colours: npt.NDArray[np.float32] | None = None,
+    colours: tuple[npt.NDArray[np.uint32], npt.NDArray[np.float32]] | None = None,
 ) -> tuple[float, bool]: ...
 def nearest_on_polyline(
     polyline: npt.NDArray[np.float32], points: npt.NDArray[np.float32], reach: float

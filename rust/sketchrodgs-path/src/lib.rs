@@ -57,6 +57,8 @@ pub enum PathError {
     BehindSize { pixels: usize, index: usize, depth: usize, alpha: usize },
     #[error("parameter {name} must be finite and > 0, got {value}")]
     BadParameter { name: &'static str, value: f64 },
+    #[error("colours: expected ascending Gaussian ids, one per colour row, got {ids} ids and {rows} rows")]
+    Colours { ids: usize, rows: usize },
 }
 
 /// The rendered index image `K` and its depth `Z` (row-major, `[row * width + col]`).
@@ -79,7 +81,14 @@ pub struct IndexImage<'a> {
     floor: Floor<'a>,
     /// Each Gaussian's view-independent colour (its SH DC term), if known: the radius estimate's
     /// widths stop where the surface's colour is not the part's (docs/extraction.md, "Radius").
-    colours: Option<&'a [[f32; 3]]>,
+    colours: Option<Colours<'a>>,
+}
+
+/// The colours of some Gaussians: `ids` ascending, `rgb` one row each.
+#[derive(Debug, Clone, Copy)]
+struct Colours<'a> {
+    ids: &'a [u32],
+    rgb: &'a [[f32; 3]],
 }
 
 /// Depth layers behind an index image, each peeled from the one before it (the renderer's
@@ -146,16 +155,19 @@ impl<'a> IndexImage<'a> {
         Ok(Self { behind: Some(Behind { count, index, depth, alpha }), ..self })
     }
 
-    /// Add each Gaussian's colour (indexed by Gaussian, as `index` is); a Gaussian past its end has
-    /// no colour.
-    pub fn with_colours(self, colours: &'a [[f32; 3]]) -> Self {
-        Self { colours: Some(colours), ..self }
+    /// Add the colours of the Gaussians `ids` (ascending, as many as `rgb` has rows): those the image
+    /// and its layers show, at least; a Gaussian not among them has no colour.
+    pub fn with_colours(self, ids: &'a [u32], rgb: &'a [[f32; 3]]) -> Result<Self, PathError> {
+        if ids.len() != rgb.len() || ids.windows(2).any(|w| w[0] >= w[1]) {
+            return Err(PathError::Colours { ids: ids.len(), rows: rgb.len() });
+        }
+        Ok(Self { colours: Some(Colours { ids, rgb }), ..self })
     }
 
     /// The colour of the Gaussian at pixel `p`, if colours are known and there is one.
     pub(crate) fn colour(&self, p: usize) -> Option<[f32; 3]> {
         let colours = self.colours?;
-        colours.get(self.gaussian(p)? as usize).copied()
+        colours.ids.binary_search(&self.gaussian(p)?).ok().map(|k| colours.rgb[k])
     }
 
     /// Whether layers behind the image are known.

@@ -323,6 +323,7 @@ fn the_radius_of_a_rope_lying_on_a_floor_is_told_by_its_colour() {
     // A rope 5 px thick (rows 18..=22) on a floor at its own depth, all pixels covered: no depth edge
     // beside the rope. Its Gaussians are orange, the floor's grey, each scattered a little.
     let scene = Synthetic::new(80, 40, FOCAL, |_, _| Some(5.0));
+    let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
     let colours: Vec<[f32; 3]> = (0..scene.centres.len())
         .map(|g| {
             let (row, wobble) = (g / 80, [0.0, 0.04, -0.03, 0.02, -0.05][g % 5]);
@@ -333,7 +334,7 @@ fn the_radius_of_a_rope_lying_on_a_floor_is_told_by_its_colour() {
     let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
     let stroke = [[2.5, 20.5], [77.5, 20.5]];
     let plain = estimate_radius(&scene.image(), &stroke, &params).unwrap().radius;
-    let image = scene.image().with_colours(&colours);
+    let image = scene.image().with_colours(&ids, &colours).unwrap();
     let radius = estimate_radius(&image, &stroke, &params).unwrap().radius;
     assert!(plain > 0.4, "without colours the floor is measured too: R = {plain}");
     assert!((radius - 0.125).abs() < 0.02, "R = {radius} (the rope's half-width: 2.5 px at 5 / 100)");

@@ -134,8 +134,8 @@ pub struct Trace {
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
 /// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width;
-/// `rendered`, `missed` and `behind` as for `trace_stroke`; `colours` (N, 3) float32, each
-/// Gaussian's colour, if known. Returns (R, whether the layers behind, not given, could change it).
+/// `rendered`, `missed` and `behind` as for `trace_stroke`; `colours`, if known, (ids (M,) uint32
+/// ascending, rgb (M, 3) float32): the colours of the Gaussians the images show. Returns (R, whether the layers behind, not given, could change it).
 #[pyfunction]
 #[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None, behind = None, colours = None))]
 #[allow(clippy::too_many_arguments)]
@@ -150,13 +150,16 @@ fn estimate_radius<'py>(
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
     behind: Option<BehindArgs<'py>>,
-    colours: Option<Bound<'py, PyArray2<f32>>>,
+    colours: Option<ColourArgs<'py>>,
 ) -> PyResult<(f32, bool)> {
     let (index, depth, alpha, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
-    let colours = colours.map(|c| c.try_readonly()).transpose()?;
-    if let Some(c) = &colours {
-        check_shape("colours", c.shape(), &[None, Some(3)])?;
+    let colours = match &colours {
+        Some((ids, rgb)) => Some((ids.try_readonly()?, rgb.try_readonly()?)),
+        None => None,
+    };
+    if let Some((_, rgb)) = &colours {
+        check_shape("colours", rgb.shape(), &[None, Some(3)])?;
     }
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
@@ -172,7 +175,9 @@ fn estimate_radius<'py>(
         None => image,
     };
     let image = match &colours {
-        Some(c) => image.with_colours(as_rows(contiguous(c, "colours")?)),
+        Some((ids, rgb)) => image
+            .with_colours(contiguous(ids, "colour ids")?, as_rows(contiguous(rgb, "colours")?))
+            .map_err(path_err)?,
         None => image,
     };
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
@@ -184,6 +189,9 @@ fn estimate_radius<'py>(
     let estimate = estimate?.map_err(path_err)?;
     Ok((estimate.radius, estimate.wants_behind))
 }
+
+/// The colours of some Gaussians: ids (M,) uint32 ascending, rgb (M, 3) float32.
+type ColourArgs<'py> = (Bound<'py, PyArray1<u32>>, Bound<'py, PyArray2<f32>>);
 
 /// The layers behind the image, (index, depth, alpha) each (L, H, W): int32, float32, float32
 /// (`sketchrodgs.render.render_behind`, stacked).
