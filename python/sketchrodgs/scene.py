@@ -99,10 +99,9 @@ class GaussianScene:
     @property
     def colors(self) -> np.ndarray:
         """(N, 3) float32 view-independent colour from the DC term, clipped to [0, 1]."""
-        dc = self.sh[:, 0] if self.sh_rows is None else self.sh[self.sh_rows, 0]
-        return np.clip(0.5 + SH_C0 * dc, 0.0, 1.0).astype(np.float32)
+        return self.colors_of(slice(None))
 
-    def colors_of(self, rows: np.ndarray) -> np.ndarray:
+    def colors_of(self, rows: np.ndarray | slice) -> np.ndarray:
         """`colors` of the Gaussians `rows` only, (len(rows), 3) float32."""
         dc = self.sh[rows, 0] if self.sh_rows is None else self.sh[self.sh_rows[rows], 0]
         return np.clip(0.5 + SH_C0 * dc, 0.0, 1.0).astype(np.float32)

@@ -109,13 +109,7 @@ fn half_widths(
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
-        .map(|(p, &n)| {
-            let width = match colour {
-                Some(colour) => walks.cross_width_in_colour(image, p, n, focal, max_px, colour),
-                None => walks.cross_width(image, p, n, focal, max_px),
-            };
-            0.5 * width as f32 * image.depth(p) / focal
-        })
+        .map(|(p, &n)| 0.5 * walks.cross_width(image, p, n, focal, max_px, colour) as f32 * image.depth(p) / focal)
         .collect()
 }
 

@@ -353,7 +353,7 @@ fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
     });
     let image = scene.image();
     for col in [20, 40, 60] {
-        let width = crate::width::Walks::default().cross_width(&image, 20 * 80 + col, [0.0, 1.0], FOCAL, 30);
+        let width = crate::width::Walks::default().cross_width(&image, 20 * 80 + col, [0.0, 1.0], FOCAL, 30, None);
         assert!((13..=17).contains(&width), "col {col}: width {width}");
     }
 }
@@ -364,7 +364,7 @@ fn a_part_in_front_of_a_surface_close_behind_measures_alone() {
     let scene = Synthetic::new(80, 40, FOCAL, |_, row| {
         Some(if (18..=22).contains(&row) { 5.0 } else { 5.0 + 10.0 * 5.0 / FOCAL })
     });
-    let width = crate::width::Walks::default().cross_width(&scene.image(), 20 * 80 + 40, [0.0, 1.0], FOCAL, 30);
+    let width = crate::width::Walks::default().cross_width(&scene.image(), 20 * 80 + 40, [0.0, 1.0], FOCAL, 30, None);
     assert_eq!(width, 5);
 }
 

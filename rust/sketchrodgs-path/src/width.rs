@@ -26,7 +26,10 @@ pub(crate) struct Walks {
 
 impl Walks {
     /// Width in pixels of the surface at pixel `p` across the unit direction `normal`, walking at
-    /// most `max_px` each way (then the width is `2 * max_px + 1`).
+    /// most `max_px` each way (then the width is `2 * max_px + 1`). With `colour` (the part's colour
+    /// and how far off it may be, RGB Euclidean), pixels whose Gaussian's colour is farther off fail
+    /// as uncovered ones do: a part lying on a surface at its own depth (a rope on a floor, a
+    /// sprinkle on icing) has no depth edge beside it.
     pub fn cross_width(
         &mut self,
         image: &IndexImage,
@@ -34,24 +37,9 @@ impl Walks {
         normal: [f32; 2],
         focal_px: f32,
         max_px: usize,
+        colour: Option<([f32; 3], f32)>,
     ) -> usize {
-        let gap = self.walk(image, p, normal, focal_px, max_px, None);
-        self.width(image.depth(p), gap, None)
-    }
-
-    /// `cross_width`, where pixels whose Gaussian's colour is farther than `off` from the part's
-    /// `colour` (RGB, Euclidean) fail as uncovered ones do: a part lying on a surface at its own
-    /// depth (a rope on a floor, a sprinkle on icing) has no depth edge beside it.
-    pub fn cross_width_in_colour(
-        &mut self,
-        image: &IndexImage,
-        p: usize,
-        normal: [f32; 2],
-        focal_px: f32,
-        max_px: usize,
-        (colour, off): ([f32; 3], f32),
-    ) -> usize {
-        let gap = self.walk(image, p, normal, focal_px, max_px, Some((colour, off)));
+        let gap = self.walk(image, p, normal, focal_px, max_px, colour);
         self.width(image.depth(p), gap, None)
     }
 
