@@ -150,6 +150,7 @@ fn slender_cluster(values: &mut [f32]) -> Option<f32> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::slender_cluster;
 
