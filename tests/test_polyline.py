@@ -50,3 +50,35 @@ def test_no_smoothing_keeps_the_points_and_short_inputs_pass_through():
     np.testing.assert_array_equal(pl.smooth_axis(points[:4], R), points[:4])
     # points all in one place are no division by zero
     assert np.isfinite(pl.smooth_axis(np.zeros((10, 3)), R)).all()
+
+
+def straight_with_hook(length_r: float, hook_r: float, turn_deg: float) -> np.ndarray:
+    """A straight axis along x, `length_r` radii long, every R/2, whose first `hook_r` radii turn
+    off it by `turn_deg` (the path stepping onto a bud at the part's end)."""
+    x = np.arange(0, length_r * R + 1e-12, R / 2)
+    axis = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    s = np.arange(hook_r * R, 0, -R / 2)[::-1]  # arc from the hook's base, outwards
+    turn = np.radians(turn_deg)
+    hook = np.stack([-s * np.cos(turn), s * np.sin(turn), np.zeros_like(s)], axis=1)
+    return np.vstack([hook[::-1], axis])
+
+
+def test_an_end_hooking_off_the_axis_is_cut_and_a_bend_is_kept():
+    # a 90-degree hook of 2.5 R at the start: cut in two steps, the axis left where it was
+    hooked = straight_with_hook(30, 2.5, 90)
+    cut = pl.cut_hooked_ends(hooked, R)
+    assert np.abs(cut[:, 1]).max() < 0.6 * R, np.abs(cut[:, 1]).max()
+    assert pl.polyline_length(cut) > 28 * R
+    # both ends are judged: the same hook at the far end goes too
+    cut = pl.cut_hooked_ends(hooked[::-1], R)
+    assert np.abs(cut[:, 1]).max() < 0.6 * R
+    # a 30-degree turn at the end and the quarter circle of radius 8 R (a bent twig) are kept
+    for kept in (
+        straight_with_hook(30, 2.5, 30),
+        8 * R * np.stack([np.cos(a := np.arange(0, np.pi / 2, 1 / 16)), np.sin(a), 0 * a], axis=1),
+    ):
+        np.testing.assert_array_equal(pl.cut_hooked_ends(kept, R), kept)
+    # a part shorter than 6.5 R is left alone, and points in one place are no division by zero
+    short = straight_with_hook(4, 1.5, 90)
+    np.testing.assert_array_equal(pl.cut_hooked_ends(short, R), short)
+    assert len(pl.cut_hooked_ends(np.zeros((30, 3)), R)) == 30

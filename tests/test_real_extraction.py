@@ -39,8 +39,6 @@ MISSES = {
         "plant_side_stem_left",
         "plant_side_stem_long",
         "plant_side_stem_right",
-        "tree_branch_lower_left",
-        "tree_branch_tall",
     },
     "radius": {"donut_sprinkle_b", "guitar_stand_leg_left", "guitar_stand_leg_right"},
 }

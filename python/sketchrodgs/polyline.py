@@ -21,6 +21,12 @@ _TUKEY_RADII = 1.5
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
 _REACHES = (2.2, 1.5, 1.5)
+# cut_hooked_ends: an end's first radii, the axis beyond them, the turn that is a hook, and how
+# often an end is cut (at 60 degrees, or once an end, the main stem's ends stayed hooked)
+_HOOK_REACH = 1.5
+_HOOK_INWARD = 5.0
+_HOOK_DEG = 45.0
+_HOOK_CUTS = 3
 
 
 def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
@@ -113,6 +119,47 @@ def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.nd
         residual = np.linalg.norm(points - fit, axis=1) / (_TUKEY_RADII * radius)
         weights = np.where(residual < 1, (1 - residual**2) ** 2, 0.0) + 1e-3
     return np.asarray(fit, np.float64)
+
+
+def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
+    """Cut the ends that hook off the axis (docs/extraction.md, "Polyline"). Where the chord over an
+    end's first `_HOOK_REACH` radii turns by more than `_HOOK_DEG` from the axis over the radii
+    after it (to `_HOOK_INWARD`), those radii go, up to `_HOOK_CUTS` times an end. A slender part
+    seldom turns that sharply within a radius or two of its end: the hook is mostly the path
+    stepping onto what the part touches there (a bud, a leaf's base, the body a leg stands on).
+    Axes shorter than `_HOOK_INWARD + _HOOK_REACH` radii are left alone.
+
+    Args:
+        points: (M, 3) axis points in order.
+        radius: R, the object's radius.
+
+    Returns:
+        (K, 3) float64, the points kept (K <= M).
+    """
+    points = np.array(points, np.float64)
+    for _ in range(_HOOK_CUTS):
+        kept = _unhooked(points, radius)
+        if len(kept) == len(points):
+            break
+        points = kept
+    return points
+
+
+def _unhooked(points: np.ndarray, radius: float) -> np.ndarray:
+    """`points` less the first `_HOOK_REACH` radii of each end that hooks (one cut an end)."""
+    keep = [0, len(points)]
+    if polyline_length(points) < (_HOOK_INWARD + _HOOK_REACH) * radius:
+        return points
+    for end in (0, 1):
+        q = points if end == 0 else points[::-1]
+        arc = arc_lengths(q)
+        cut = int(np.searchsorted(arc, _HOOK_REACH * radius))
+        inner = int(np.searchsorted(arc, _HOOK_INWARD * radius))
+        chord, axis = q[cut] - q[0], q[inner] - q[cut]
+        norms = float(np.linalg.norm(chord) * np.linalg.norm(axis))
+        if norms > 0 and chord @ axis < np.cos(np.radians(_HOOK_DEG)) * norms:
+            keep[end] = cut if end == 0 else len(points) - cut
+    return points[keep[0] : keep[1]]
 
 
 def _third_difference_gram(n: int) -> np.ndarray:
