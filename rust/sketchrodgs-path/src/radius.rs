@@ -3,7 +3,7 @@
 
 use crate::search::WALK_RADII;
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{Walks, median};
+use crate::width::{Walks, colour_distance, median};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// The first radius is the median of the slender cluster of half-widths (`slender_cluster`): the
@@ -125,11 +125,11 @@ fn part_colour(image: &IndexImage, pixels: &[Option<usize>]) -> Option<([f32; 3]
     }
     let channel = |k: usize| median(&mut colours.iter().map(|c| c[k]).collect::<Vec<f32>>());
     let centre = [channel(0), channel(1), channel(2)];
-    let mut off: Vec<f32> =
-        colours.iter().map(|c| c.iter().zip(&centre).map(|(a, b)| (a - b) * (a - b)).sum::<f32>().sqrt()).collect();
+    let mut off: Vec<f32> = colours.iter().map(|&c| colour_distance(c, centre)).collect();
     let spread = median(&mut off);
     Some((centre, (COLOUR_SPREADS * spread).max(COLOUR_OFF_LEAST)))
 }
+
 /// The median of the lowest run of `values` spanning at most `CLUSTER_RATIO` (from its least) that
 /// holds `CLUSTER_SHARE` of them, at least 3: the part's widths, where wider things under the
 /// stroke (leaves over a stem, seen from below) outnumber them. The median of all where no run

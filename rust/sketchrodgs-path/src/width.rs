@@ -53,12 +53,8 @@ impl Walks {
         max_px: usize,
         colour: Option<([f32; 3], f32)>,
     ) -> f32 {
-        let off_colour = |q: usize| {
-            colour.zip(image.colour(q)).is_some_and(|((a, off), b)| {
-                let d2: f32 = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum();
-                d2 > off * off
-            })
-        };
+        let off_colour =
+            |q: usize| colour.zip(image.colour(q)).is_some_and(|((a, off), b)| colour_distance(a, b) > off);
         let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
         let z0 = image.depth(p);
         let gap = GAP_FLOOR_PX * z0 / focal_px;
@@ -186,4 +182,9 @@ pub(crate) fn median(values: &mut [f32]) -> f32 {
     values.sort_by(f32::total_cmp);
     let n = values.len();
     if n % 2 == 1 { values[n / 2] } else { 0.5 * (values[n / 2 - 1] + values[n / 2]) }
+}
+
+/// The RGB Euclidean distance between two colours.
+pub(crate) fn colour_distance(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>().sqrt()
 }

@@ -135,7 +135,8 @@ pub struct Trace {
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
 /// index, depth, alpha (H, W); stroke (M, 2) float32; focal_px > 0; band_px 0 = 1 % of the width;
 /// `rendered`, `missed` and `behind` as for `trace_stroke`; `colours`, if known, (ids (M,) uint32
-/// ascending, rgb (M, 3) float32): the colours of the Gaussians the images show. Returns (R, whether the layers behind, not given, could change it).
+/// ascending, rgb (M, 3) float32): the colours of the Gaussians the images show. Returns (R,
+/// whether the layers behind, not given, could change it).
 #[pyfunction]
 #[pyo3(signature = (index, depth, alpha, stroke, focal_px, band_px = 0.0, rendered = None, missed = None, behind = None, colours = None))]
 #[allow(clippy::too_many_arguments)]
@@ -155,12 +156,12 @@ fn estimate_radius<'py>(
     let (index, depth, alpha, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
     let colours = match &colours {
-        Some((ids, rgb)) => Some((ids.try_readonly()?, rgb.try_readonly()?)),
+        Some((ids, rgb)) => {
+            check_shape("colours", rgb.shape(), &[None, Some(3)])?;
+            Some((ids.try_readonly()?, rgb.try_readonly()?))
+        }
         None => None,
     };
-    if let Some((_, rgb)) = &colours {
-        check_shape("colours", rgb.shape(), &[None, Some(3)])?;
-    }
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
     check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
