@@ -86,6 +86,16 @@ def continuation(
     size: float,
     link: float,
 ) -> npt.NDArray[np.int64]: ...
+def depth_spikes(
+    points: npt.NDArray[np.float64],
+    uv: npt.NDArray[np.float64],
+    radius_px: npt.NDArray[np.float64],
+    radius: float,
+    span: float,
+    depth: float,
+    screen: float,
+    end: float,
+) -> npt.NDArray[np.int64]: ...
 def cross_section_centroids(
     axis: npt.NDArray[np.float64],
     tangents: npt.NDArray[np.float64],

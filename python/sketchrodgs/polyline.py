@@ -27,6 +27,12 @@ _HOOK_REACH = 1.5
 _HOOK_INWARD = 5.0
 _HOOK_DEG = 45.0
 _HOOK_CUTS = 3
+# bridge_depth_spikes: the longest stretch bridged, how far it leaves its chord in depth and how
+# little on screen (all in radii), and how far from the ends it must lie (ends are cut_hooked_ends')
+_SPIKE_SPAN = 10.0
+_SPIKE_DEPTH = 3.5
+_SPIKE_SCREEN = 0.7
+_SPIKE_END = 3.0
 
 
 def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
@@ -142,6 +148,46 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
         if len(kept) == len(points):
             break
         points = kept
+    return points
+
+
+def bridge_depth_spikes(points: np.ndarray, radius: float, uv: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
+    """Bridge the stretches where the axis runs out in depth and back (docs/extraction.md,
+    "Polyline"). A stretch of at most `_SPIKE_SPAN` radii whose points leave its 3D chord by more
+    than `_SPIKE_DEPTH` radii while staying within `_SPIKE_SCREEN` radii of its chord on screen is
+    the path climbing onto something in front of the part (a leaf it passes behind) or dropping
+    behind it: a part seldom runs out of its line and back within a few radii, and exactly along
+    the line of sight. Its points go onto the chord, spaced as they were along the arc. Stretches
+    within `_SPIKE_END` radii of an end are left to `cut_hooked_ends`. The search (in Rust) takes
+    points about R apart.
+
+    Args:
+        points: (M, 3) axis points in order, about R/2 apart.
+        radius: R, the object's radius.
+        uv: (M, 2) the points projected into the stroke's camera (pixels).
+        radius_px: (M,) R in pixels at each point's depth.
+
+    Returns:
+        (M, 3) float64.
+    """
+    points = np.array(points, np.float64, order="C")
+    if len(points) < 3:
+        return points
+    uv = np.ascontiguousarray(uv, np.float64)
+    radius_px = np.ascontiguousarray(radius_px, np.float64)
+    arc = arc_lengths(points)
+    if not arc[-1] > 0:
+        return points
+    # judged on points about R apart (a spike is several radii long), a quarter of the work at R / 2
+    every = np.arange(0, len(points), max(1, min(round(radius * (len(points) - 1) / arc[-1]), len(points))))
+    spikes = every[
+        _core.depth_spikes(
+            points[every], uv[every], radius_px[every], radius, _SPIKE_SPAN, _SPIKE_DEPTH, _SPIKE_SCREEN, _SPIKE_END
+        )
+    ]
+    for i, j in spikes:
+        along = (arc[i : j + 1] - arc[i]) / (arc[j] - arc[i])
+        points[i + 1 : j] = points[i] + along[1:-1, None] * (points[j] - points[i])
     return points
 
 

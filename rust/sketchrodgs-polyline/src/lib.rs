@@ -23,6 +23,7 @@ use rayon::prelude::*;
 pub mod continuation;
 pub mod proximity;
 pub mod segment;
+pub mod spikes;
 
 /// What makes a query impossible.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
