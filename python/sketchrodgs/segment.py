@@ -133,11 +133,24 @@ def segment_and_bind(
     continuation_size = default_continuation_size(length, radius) if attach_size is None else attach_size
     if attach_size is None:
         attach_size = default_attach_size(length, radius)
-    binding = part_and_attached(polyline, scene, radius, grow=grow, attach_size=attach_size if attach else None)
-    if not attach:
-        return binding
-    binding = _with_continuations(binding, polyline, scene, radius, continuation_size)
-    return _with_strays(binding, polyline, scene, radius, attach_size)
+    # Every step below reads the centres within its own reach of the rod: cut the scene to all of
+    # their reaches once (each step's own cut is then a pass over thousands, not millions).
+    rows = near_box(polyline, scene.means, _reach(radius, grow, attach_size, continuation_size))
+    means = _f32(scene.means[rows])
+    binding = _part_and_attached(polyline, means, radius, grow=grow, attach_size=attach_size if attach else None)
+    if attach:
+        binding = _with_continuations(binding, polyline, means, radius, continuation_size)
+        binding = _with_strays(binding, polyline, means, radius, attach_size)
+    return Binding(rows[binding.gaussian_ids], *(getattr(binding, f) for f in list(Binding.__dataclass_fields__)[1:]))
+
+
+def _reach(radius: float, grow: float, attach_size: float, continuation_size: float) -> float:
+    """How far from the rod's polyline `segment_and_bind` may read a centre (a bound above each
+    step's own reach): the part and its attached parts with their two links, or a continuation
+    past an end with its link, and around either the strays' search."""
+    link = LINK_MAX * radius
+    moving = max(grow * radius + attach_size + 2 * link, continuation_size + CONTINUATION_LINKS * link)
+    return 1.01 * (moving + STRAY_REACH * radius + min(STRAY_SIZE * radius, attach_size) + link)
 
 
 def part_and_attached(
@@ -145,6 +158,13 @@ def part_and_attached(
 ) -> Binding:
     """The part and its attached parts (None: none), in one Rust call, without the strays: the
     step that `tests/reference/segment_reference.py` matches to the bit."""
+    return _part_and_attached(polyline, _f32(scene.means), radius, grow=grow, attach_size=attach_size)
+
+
+def _part_and_attached(
+    polyline: np.ndarray, means: np.ndarray, radius: float, *, grow: float, attach_size: float | None
+) -> Binding:
+    """`part_and_attached` over the centres `means` (N, 3) float32 (ids index them)."""
     polyline = np.ascontiguousarray(polyline, np.float64)
     # The arc lengths and the length as NumPy sums them: the decisions near the rod's ends compare
     # with them to the bit.
@@ -152,7 +172,7 @@ def part_and_attached(
         polyline,
         arc_lengths(polyline),
         polyline_length(polyline),
-        _f32(scene.means),
+        means,
         float(radius),
         float(grow),
         LINK_SPACINGS,
@@ -165,7 +185,7 @@ def part_and_attached(
 
 
 def _with_strays(
-    binding: Binding, polyline: np.ndarray, scene: GaussianScene, radius: float, attach_size: float
+    binding: Binding, polyline: np.ndarray, means: np.ndarray, radius: float, attach_size: float
 ) -> Binding:
     """`binding` and the strays around it (see the module docstring; no larger than
     `attach_size` either), each bound as an attached Gaussian at the `(segment, t)` of the moving
@@ -179,7 +199,7 @@ def _with_strays(
     searched = np.flatnonzero(binding.attached | start | end)  # entries of the binding
     if len(searched) < 5:
         return binding
-    moving = scene.means[binding.gaussian_ids[searched]].astype(np.float64)
+    moving = means[binding.gaussian_ids[searched]].astype(np.float64)
     moving_tree = cKDTree(moving, balanced_tree=False, compact_nodes=False)
     link = _link(moving_tree, radius)
     reach, size = STRAY_REACH * radius, min(STRAY_SIZE * radius, attach_size)
@@ -188,18 +208,18 @@ def _with_strays(
     region = reach + size + link
     # one pass over the scene for the box around all of them, then the boxes around each end and
     # the attached parts apart (the one box around a long rope would hold all of it)
-    rows = near_box(moving, scene.means, region)
-    centres = scene.means[rows]
+    rows = near_box(moving, means, region)
+    centres = means[rows]
     inside = np.zeros(len(rows), bool)
     for group in (binding.attached, start & ~binding.attached, end & ~binding.attached):
         if group.any():
-            points = scene.means[binding.gaussian_ids[group]].astype(np.float64)
+            points = means[binding.gaussian_ids[group]].astype(np.float64)
             low, high = points.min(axis=0) - region, points.max(axis=0) + region
             inside |= ((centres >= low) & (centres <= high)).all(axis=1)
     rows = rows[inside & ~np.isin(rows, binding.gaussian_ids)]
     if len(rows) == 0:
         return binding
-    points = scene.means[rows].astype(np.float64)
+    points = means[rows].astype(np.float64)
     to_moving, nearest = moving_tree.query(points, distance_upper_bound=region)
     inside = np.isfinite(to_moving)
     rows, points, to_moving, nearest = rows[inside], points[inside], to_moving[inside], nearest[inside]
@@ -224,7 +244,7 @@ def _with_strays(
     # each rides with the searched Gaussian nearest it
     joined = searched[nearest[goes]]
     segment, t = binding.segment[joined], binding.t[joined]
-    centre = scene.means[stray_rows].astype(np.float64)
+    centre = means[stray_rows].astype(np.float64)
     # no stray lies further from the axis than what moves, and a region more
     farthest = float(binding.distance.max()) + region
     _, _, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), farthest)
@@ -248,7 +268,7 @@ def _link(tree: cKDTree, radius: float) -> float:
 
 
 def _with_continuations(
-    binding: Binding, polyline: np.ndarray, scene: GaussianScene, radius: float, size: float
+    binding: Binding, polyline: np.ndarray, means: np.ndarray, radius: float, size: float
 ) -> Binding:
     """`binding` and what continues the part past each end (see the module docstring), each bound
     as an attached Gaussian at that end, with its own offset."""
@@ -263,12 +283,12 @@ def _with_continuations(
     if near_ends.sum() < 5:
         return binding
     # the link from the part's spacing there (the part is sampled alike all along)
-    link = CONTINUATION_LINKS * _link(cKDTree(scene.means[binding.gaussian_ids[near_ends]].astype(np.float64)), radius)
+    link = CONTINUATION_LINKS * _link(cKDTree(means[binding.gaussian_ids[near_ends]].astype(np.float64)), radius)
     # the centres not bound yet within reach of the ends: a continuation and a link more (one pass
     # over the scene for the box around both)
     region = size + link
     vertices = polyline[[0, -1]]
-    around = _core.rows_in_box(scene.means, tuple(vertices.min(axis=0) - region), tuple(vertices.max(axis=0) + region))
+    around = _core.rows_in_box(means, tuple(vertices.min(axis=0) - region), tuple(vertices.max(axis=0) + region))
     around = around[~np.isin(around, binding.gaussian_ids)]
     found: list[Binding] = []
 
@@ -281,19 +301,19 @@ def _with_continuations(
         rows = around
         for other in found:
             rows = rows[~np.isin(rows, other.gaussian_ids)]
-        from_vertex = np.linalg.norm(scene.means[rows] - vertex, axis=1)
+        from_vertex = np.linalg.norm(means[rows] - vertex, axis=1)
         close = from_vertex <= region
         rows, from_vertex = rows[close], from_vertex[close]
         # seeds: the centres linked to the end's part, which lies within its reach of the vertex
-        end_part = scene.means[binding.gaussian_ids[at_end]]
+        end_part = means[binding.gaussian_ids[at_end]]
         near = np.flatnonzero(from_vertex <= float(np.linalg.norm(end_part - vertex, axis=1).max()) + link)
         if len(near) == 0:
             continue
-        touching, _ = cKDTree(end_part).query(scene.means[rows[near]], distance_upper_bound=link * (1 + 1e-6))
+        touching, _ = cKDTree(end_part).query(means[rows[near]], distance_upper_bound=link * (1 + 1e-6))
         seeds = near[np.isfinite(touching)].astype(np.int64)
         if len(seeds) == 0:
             continue
-        points = np.ascontiguousarray(scene.means[rows], np.float32)
+        points = np.ascontiguousarray(means[rows], np.float32)
         goes = _core.continuation(points, seeds, tuple(vertex), tuple(outward), float(size), float(link))
         if len(goes) == 0:
             continue
