@@ -90,27 +90,41 @@ def _seen_from(points: np.ndarray, eye_z: float = -1.0, focal: float = 800.0) ->
     return focal * points[:, :2] / depth[:, None], focal * R / depth
 
 
-def test_a_stretch_running_out_in_depth_and_back_is_bridged_and_a_visible_bend_is_kept():
+def test_a_detour_in_depth_or_doubling_back_is_bridged_and_a_bend_is_kept():
     # a straight axis 30 R along x, every R/2; from 11 R to 15 R it runs 4 R towards the camera
     # and back (the path over a leaf in front of the stem), straight on screen
     x = np.arange(0, 30.01, 0.5) * R
     bump = 4 * R * np.clip(1 - np.abs(x - 13 * R) / (2 * R), 0, None)
     spiked = np.stack([x, 0 * x, -bump], axis=1)
-    bridged = pl.bridge_depth_spikes(spiked, R, *_seen_from(spiked))
+    bridged = pl.bridge_detours(spiked, R, *_seen_from(spiked))
     assert np.abs(bridged[:, 2]).max() < 1e-12
     # the points outside it stay; those on it go onto the chord in order, spaced as along the arc
     outside = (x < 9.9 * R) | (x > 16.1 * R)
     np.testing.assert_array_equal(bridged[outside], spiked[outside])
     assert np.all(np.diff(bridged[:, 0]) > 0) and np.allclose(bridged[:, 1], 0)
-    # the same excursion seen from the side (on screen it leaves the line) is a bend, kept
+    # the same excursion seen from the side (on screen it leaves the line, and its arc is 1.9
+    # times its chord) is a bend, kept
     sideways = spiked[:, [0, 2, 1]]
-    np.testing.assert_array_equal(pl.bridge_depth_spikes(sideways, R, *_seen_from(sideways)), sideways)
+    np.testing.assert_array_equal(pl.bridge_detours(sideways, R, *_seen_from(sideways)), sideways)
+    # a finger out 4 R and back beside itself (a path onto a side branch at a node and back),
+    # seen from any side: bridged, the axis straight again
+    out = np.stack([np.full(8, 12.0), np.arange(0.5, 4.01, 0.5), np.zeros(8)], axis=1)
+    finger = R * np.concatenate(
+        [
+            np.stack([x[x <= 12 * R] / R, 0 * x[x <= 12 * R], 0 * x[x <= 12 * R]], axis=1),
+            out,
+            out[::-1][1:] + [0.5, 0, 0],
+        ]
+        + [np.stack([x[x >= 12.5 * R] / R, 0 * x[x >= 12.5 * R], 0 * x[x >= 12.5 * R]], axis=1)]
+    )
+    for seen in (finger, finger[:, [0, 2, 1]]):
+        assert np.abs(pl.bridge_detours(seen, R, *_seen_from(seen))[:, 1:]).max() < 1e-12
     # a shallow arch (2 R out over 12 R) is the part's own curve, kept
     arch = np.stack([x, 0 * x, -2 * R * np.sin(np.pi * np.clip((x - 9 * R) / (12 * R), 0, 1))], axis=1)
-    np.testing.assert_array_equal(pl.bridge_depth_spikes(arch, R, *_seen_from(arch)), arch)
+    np.testing.assert_array_equal(pl.bridge_detours(arch, R, *_seen_from(arch)), arch)
     # within 3 R of an end it is left to cut_hooked_ends
     at_end = np.stack([x, 0 * x, -4 * R * np.clip(1 - np.abs(x - 3 * R) / (2 * R), 0, None)], axis=1)
-    np.testing.assert_array_equal(pl.bridge_depth_spikes(at_end, R, *_seen_from(at_end)), at_end)
+    np.testing.assert_array_equal(pl.bridge_detours(at_end, R, *_seen_from(at_end)), at_end)
     # too short to hold a stretch, and points in one place: unchanged, no division by zero
     for kept in (spiked[:2], np.zeros((30, 3))):
-        np.testing.assert_array_equal(pl.bridge_depth_spikes(kept, R, *_seen_from(kept)), kept)
+        np.testing.assert_array_equal(pl.bridge_detours(kept, R, *_seen_from(kept)), kept)

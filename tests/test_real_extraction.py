@@ -26,7 +26,6 @@ MISSES = {
     "cross_estimated": {
         "donut_sprinkle_b",
         "guitar_stand_leg_right",
-        "plant_main_stem",
         "tree_branch_tall",
     },
     "jitter": {

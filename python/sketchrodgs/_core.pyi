@@ -86,7 +86,7 @@ def continuation(
     size: float,
     link: float,
 ) -> npt.NDArray[np.int64]: ...
-def depth_spikes(
+def detours(
     points: npt.NDArray[np.float64],
     uv: npt.NDArray[np.float64],
     radius_px: npt.NDArray[np.float64],
@@ -94,6 +94,8 @@ def depth_spikes(
     span: float,
     depth: float,
     screen: float,
+    back_ratio: float,
+    back: float,
     end: float,
 ) -> npt.NDArray[np.int64]: ...
 def cross_section_centroids(

@@ -360,7 +360,7 @@ def extract_rod(
             pixel_path,
             pieces,
         )
-    # Recentre on a uniform sampling at half the radius, smooth, bridge depth spikes, cut hooked ends,
+    # Recentre on a uniform sampling at half the radius, smooth, bridge detours, cut hooked ends,
     # resample to the edge length.
     _check_vertex_count("radius", pl.polyline_length(points), radius / 2, radius, 4 * MAX_ROD_VERTICES)
     points = pl.resample(points, radius / 2)
@@ -369,7 +369,7 @@ def extract_rod(
         points = pl.recentre(points, nearby, radius)
     points = pl.smooth_axis(points, radius, smoothing)
     uv, z = camera.project(points)
-    points = pl.bridge_depth_spikes(points, radius, uv, radius * camera.fx / np.maximum(z, 1e-12))
+    points = pl.bridge_detours(points, radius, uv, radius * camera.fx / np.maximum(z, 1e-12))
     points = pl.cut_hooked_ends(points, radius)
     length = pl.polyline_length(points)
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)

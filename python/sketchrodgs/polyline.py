@@ -27,12 +27,15 @@ _HOOK_REACH = 1.5
 _HOOK_INWARD = 5.0
 _HOOK_DEG = 45.0
 _HOOK_CUTS = 3
-# bridge_depth_spikes: the longest stretch bridged, how far it leaves its chord in depth and how
-# little on screen (all in radii), and how far from the ends it must lie (ends are cut_hooked_ends')
-_SPIKE_SPAN = 10.0
-_SPIKE_DEPTH = 3.5
-_SPIKE_SCREEN = 0.7
-_SPIKE_END = 3.0
+# bridge_detours: the longest stretch bridged; how far it leaves its chord in depth and how little
+# on screen; how many times its chord its arc is where it doubles back, and how far it then leaves
+# the chord; how far from the ends it lies (ends are cut_hooked_ends'). In radii but the ratio.
+_DETOUR_SPAN = 10.0
+_DETOUR_DEPTH = 3.5
+_DETOUR_SCREEN = 0.7
+_DETOUR_BACK_RATIO = 2.5
+_DETOUR_BACK = 3.0
+_DETOUR_END = 3.0
 
 
 def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
@@ -151,14 +154,15 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
     return points
 
 
-def bridge_depth_spikes(points: np.ndarray, radius: float, uv: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
-    """Bridge the stretches where the axis runs out in depth and back (docs/extraction.md,
-    "Polyline"). A stretch of at most `_SPIKE_SPAN` radii whose points leave its 3D chord by more
-    than `_SPIKE_DEPTH` radii while staying within `_SPIKE_SCREEN` radii of its chord on screen is
-    the path climbing onto something in front of the part (a leaf it passes behind) or dropping
-    behind it: a part seldom runs out of its line and back within a few radii, and exactly along
-    the line of sight. Its points go onto the chord, spaced as they were along the arc. Stretches
-    within `_SPIKE_END` radii of an end are left to `cut_hooked_ends`. The search (in Rust) takes
+def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
+    """Bridge the detours of the axis (docs/extraction.md, "Polyline", **Detours**): stretches of at
+    most `_DETOUR_SPAN` radii that leave their chord and come back, either in depth (by more than
+    `_DETOUR_DEPTH` radii, staying within `_DETOUR_SCREEN` radii of the chord on screen: the path
+    climbed onto a leaf in front of the part, or dropped behind it) or doubling back (an arc at
+    least `_DETOUR_BACK_RATIO` times the chord, leaving it by more than `_DETOUR_BACK` radii: the
+    path ran out onto a side branch or a leaf at a node and back). A part seldom does either within
+    a few radii. The points of each go onto its chord, spaced as they were along the arc. Stretches
+    within `_DETOUR_END` radii of an end are left to `cut_hooked_ends`. The search (in Rust) takes
     points about R apart.
 
     Args:
@@ -178,14 +182,10 @@ def bridge_depth_spikes(points: np.ndarray, radius: float, uv: np.ndarray, radiu
     arc = arc_lengths(points)
     if not arc[-1] > 0:
         return points
-    # judged on points about R apart (a spike is several radii long), a quarter of the work at R / 2
+    # judged on points about R apart (a detour is several radii long), a quarter of the work at R / 2
     every = np.arange(0, len(points), max(1, min(round(radius * (len(points) - 1) / arc[-1]), len(points))))
-    spikes = every[
-        _core.depth_spikes(
-            points[every], uv[every], radius_px[every], radius, _SPIKE_SPAN, _SPIKE_DEPTH, _SPIKE_SCREEN, _SPIKE_END
-        )
-    ]
-    for i, j in spikes:
+    limits = (_DETOUR_SPAN, _DETOUR_DEPTH, _DETOUR_SCREEN, _DETOUR_BACK_RATIO, _DETOUR_BACK, _DETOUR_END)
+    for i, j in every[_core.detours(points[every], uv[every], radius_px[every], radius, *limits)]:
         along = (arc[i : j + 1] - arc[i]) / (arc[j] - arc[i])
         points[i + 1 : j] = points[i] + along[1:-1, None] * (points[j] - points[i])
     return points

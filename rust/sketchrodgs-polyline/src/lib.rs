@@ -21,9 +21,9 @@
 use rayon::prelude::*;
 
 pub mod continuation;
+pub mod detours;
 pub mod proximity;
 pub mod segment;
-pub mod spikes;
 
 /// What makes a query impossible.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,12 +1,12 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
 //! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`, `_core.continuation(...)`,
-//! `_core.depth_spikes(...)`.
+//! `_core.detours(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use sketchrodgs_polyline::continuation as past_end;
+use sketchrodgs_polyline::detours::DetourLimits;
 use sketchrodgs_polyline::segment::{self, SegmentParams};
-use sketchrodgs_polyline::spikes::{self, SpikeLimits};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
 use crate::errors::SketchRodGSError;
@@ -178,12 +178,12 @@ fn continuation<'py>(
     Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
 }
 
-/// The depth spikes of the axis `points` (M, 3) float64 seen at `uv` (M, 2) float64 with
-/// `radius_px` (M,) float64 (`sketchrodgs_polyline::spikes::depth_spikes`; the limits in radii):
-/// (K, 2) int64, each row the first and last point of a stretch to put onto its chord.
+/// The detours of the axis `points` (M, 3) float64 seen at `uv` (M, 2) float64 with `radius_px`
+/// (M,) float64 (`sketchrodgs_polyline::detours::detours`; the limits in radii, `back_ratio` a
+/// ratio): (K, 2) int64, each row the first and last point of a stretch to put onto its chord.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-fn depth_spikes<'py>(
+fn detours<'py>(
     py: Python<'py>,
     points: &Bound<'py, PyArray2<f64>>,
     uv: &Bound<'py, PyArray2<f64>>,
@@ -192,6 +192,8 @@ fn depth_spikes<'py>(
     span: f64,
     depth: f64,
     screen: f64,
+    back_ratio: f64,
+    back: f64,
     end: f64,
 ) -> PyResult<Bound<'py, PyArray2<i64>>> {
     let (points, uv, radius_px) = (points.try_readonly()?, uv.try_readonly()?, radius_px.try_readonly()?);
@@ -199,7 +201,8 @@ fn depth_spikes<'py>(
     check_shape("points", points.shape(), &[None, Some(3)])?;
     check_shape("uv", uv.shape(), &[Some(m), Some(2)])?;
     check_shape("radius_px", radius_px.shape(), &[Some(m)])?;
-    for (name, value) in [("radius", radius), ("span", span), ("depth", depth), ("screen", screen), ("end", end)] {
+    let limits = [("radius", radius), ("span", span), ("depth", depth), ("screen", screen), ("back_ratio", back_ratio)];
+    for (name, value) in limits.into_iter().chain([("back", back), ("end", end)]) {
         if !(value.is_finite() && value > 0.0) {
             return Err(SketchRodGSError::new_err(format!("{name}: must be finite and > 0, got {value}")));
         }
@@ -207,8 +210,8 @@ fn depth_spikes<'py>(
     let points: &[[f64; 3]] = contiguous(&points, "points")?.as_chunks::<3>().0;
     let uv: &[[f64; 2]] = contiguous(&uv, "uv")?.as_chunks::<2>().0;
     let radius_px = contiguous(&radius_px, "radius_px")?;
-    let limits = SpikeLimits { span, depth, screen, end };
-    let found = py.detach(|| spikes::depth_spikes(points, uv, radius_px, radius, limits));
+    let limits = DetourLimits { span, depth, screen, back_ratio, back, end };
+    let found = py.detach(|| sketchrodgs_polyline::detours::detours(points, uv, radius_px, radius, limits));
     let flat: Vec<i64> = found.iter().flat_map(|&(i, j)| [i as i64, j as i64]).collect();
     Ok(numpy::ndarray::Array2::from_shape_vec((found.len(), 2), flat)
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?
@@ -221,6 +224,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(segment_and_bind, m)?)?;
     m.add_function(wrap_pyfunction!(rows_in_box, m)?)?;
     m.add_function(wrap_pyfunction!(continuation, m)?)?;
-    m.add_function(wrap_pyfunction!(depth_spikes, m)?)?;
+    m.add_function(wrap_pyfunction!(detours, m)?)?;
     Ok(())
 }
