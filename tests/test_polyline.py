@@ -84,6 +84,19 @@ def test_an_end_hooking_off_the_axis_is_cut_and_a_bend_is_kept():
     assert len(pl.cut_hooked_ends(np.zeros((30, 3)), R)) == 30
 
 
+def test_an_end_run_off_the_axis_for_radii_is_cut_at_its_corner_and_a_bend_is_kept():
+    # a 6 R end run at 90 degrees (a leg's end run onto the other leg where they meet): too long for
+    # the 1.5 R chord, cut at the corner; the axis is left as it was
+    hooked = straight_with_hook(30, 6, 90)
+    cut = pl.cut_hooked_ends(hooked, R)
+    assert np.abs(cut[:, 1]).max() < 0.6 * R, np.abs(cut[:, 1]).max()
+    assert pl.polyline_length(cut) > 29 * R
+    assert np.abs(pl.cut_hooked_ends(hooked[::-1], R)[:, 1]).max() < 0.6 * R
+    # a 45-degree bend 6 R from the end is the part's, and so is a 90-degree one on an axis under 20 R
+    for kept in (straight_with_hook(30, 6, 45), straight_with_hook(12, 6, 90)):
+        np.testing.assert_array_equal(pl.cut_hooked_ends(kept, R), kept)
+
+
 def _seen_from(points: np.ndarray, eye_z: float = -1.0, focal: float = 800.0) -> tuple[np.ndarray, np.ndarray]:
     """Pixels of `points` for a pinhole at (0, 0, eye_z) looking along +z, and R in pixels there."""
     depth = points[:, 2] - eye_z

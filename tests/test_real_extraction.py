@@ -30,7 +30,6 @@ MISSES = {
     },
     "jitter": {
         "donut_sprinkle_b",
-        "guitar_stand_foot_front",
         "guitar_stand_leg_left",
         "guitar_stand_leg_right",
         "plant_main_stem",

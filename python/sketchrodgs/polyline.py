@@ -27,6 +27,14 @@ _HOOK_REACH = 1.5
 _HOOK_INWARD = 5.0
 _HOOK_DEG = 45.0
 _HOOK_CUTS = 3
+# ... then corners: within _CORNER_REACH radii of an end, the directions over the _CORNER_BEFORE
+# radii before a point and the _CORNER_AFTER radii after it turning by over _CORNER_DEG; axes
+# under _CORNER_LEAST radii are left alone, and a cut leaves that less _CORNER_REACH
+_CORNER_DEG = 65.0
+_CORNER_BEFORE = 2.0
+_CORNER_AFTER = 4.0
+_CORNER_REACH = 10.0
+_CORNER_LEAST = 20.0
 # bridge_detours: the longest stretch bridged; how far it leaves its chord in depth and how little
 # on screen; how many times its chord its arc is where it doubles back, and how far it then leaves
 # the chord; how far from the ends it lies (ends are cut_hooked_ends'). In radii but the ratio.
@@ -151,7 +159,32 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
         if len(kept) == len(points):
             break
         points = kept
-    return points
+    return _uncornered(points, radius)
+
+
+def _uncornered(points: np.ndarray, radius: float) -> np.ndarray:
+    """`points` cut at each end's sharpest corner within `_CORNER_REACH` radii of it, if one turns
+    by over `_CORNER_DEG`: a hook too long for the 1.5 R chord of `_unhooked` (a leg's end run onto
+    the other leg where they meet, a foot's onto the leg)."""
+    keep = [0, len(points)]
+    if len(points) < 2 or polyline_length(points) < _CORNER_LEAST * radius:
+        return points
+    for end in (0, 1):
+        q = points if end == 0 else points[::-1]
+        arc = arc_lengths(q) / radius
+        at = np.arange(1.5, _CORNER_REACH + 1e-9, 0.25)
+        at = at[at <= arc[-1] - (_CORNER_LEAST - _CORNER_REACH)]
+        corner, before, after = (
+            np.searchsorted(arc, a) for a in (at, np.maximum(at - _CORNER_BEFORE, 0), at + _CORNER_AFTER)
+        )
+        inward, outward = q[corner] - q[before], q[after] - q[corner]
+        norms = np.linalg.norm(inward, axis=1) * np.linalg.norm(outward, axis=1)
+        cosine = np.sum(inward * outward, axis=1) / np.where(norms > 0, norms, np.inf)
+        sharp = (norms > 0) & (cosine < np.cos(np.radians(_CORNER_DEG)))
+        if sharp.any():
+            cut = int(corner[np.flatnonzero(sharp)[np.argmin(cosine[sharp])]])
+            keep[end] = cut if end == 0 else len(points) - cut
+    return points[keep[0] : keep[1]]
 
 
 def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
