@@ -28,9 +28,10 @@ _HOOK_INWARD = 5.0
 _HOOK_DEG = 45.0
 _HOOK_CUTS = 3
 # ... then corners: within _CORNER_REACH radii of an end, the directions over the _CORNER_BEFORE
-# radii before a point and the _CORNER_AFTER radii after it turning by over _CORNER_DEG; axes
-# under _CORNER_LEAST radii are left alone, and a cut leaves that less _CORNER_REACH
-_CORNER_DEG = 65.0
+# radii before a point and the _CORNER_AFTER radii after it turning by over _CORNER_DEG (the hook's
+# angle at the scale of radii); axes under _CORNER_LEAST radii are left alone, and a cut leaves
+# that less _CORNER_REACH
+_CORNER_DEG = 45.0
 _CORNER_BEFORE = 2.0
 _CORNER_AFTER = 4.0
 _CORNER_REACH = 10.0
