@@ -368,8 +368,7 @@ def extract_rod(
         nearby = scene.means[pl.near_box(points, scene.means, 2.5 * radius)]
         points = pl.recentre(points, nearby, radius)
     points = pl.smooth_axis(points, radius, smoothing)
-    uv, z = camera.project(points)
-    points = pl.bridge_detours(points, radius, uv, radius * camera.fx / np.maximum(z, 1e-12))
+    points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2])
     points = pl.cut_hooked_ends(points, radius)
     length = pl.polyline_length(points)
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
@@ -493,6 +492,12 @@ def _shown_colours(
     return ids, scene.colors_of(ids)
 
 
+def _on_screen(camera: Camera, points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`points` (N, 3) as `camera` sees them: pixels (N, 2), depth (N,), and R in pixels there (N,)."""
+    uv, z = camera.project(points)
+    return uv, z, radius * camera.fx / np.maximum(z, 1e-12)
+
+
 def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
     """The Gaussians along the path in order, one visit each, leaving out those whose centre
     projects more than R (3 px at least) from every pixel of the path: a big Gaussian of what the
@@ -505,8 +510,7 @@ def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Ca
     ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     _, first = np.unique(ids, return_index=True)
     ids = ids[np.sort(first)]  # first visit of each Gaussian, in path order
-    uv, z = camera.project(means[ids])
-    radius_px = radius * camera.fx / np.maximum(z, 1e-12)
+    uv, z, radius_px = _on_screen(camera, means[ids], radius)
     off_path, _ = cKDTree(pixels + 0.5).query(np.where(np.isfinite(uv), uv, -1e9))
     near, wide = (
         (z > 0) & (off_path <= np.maximum(_NEAR_PIXEL_PX, k * radius_px))
@@ -521,8 +525,7 @@ def _forward_only(ids: np.ndarray, means: np.ndarray, camera: Camera, stroke: np
     """The path's Gaussians less those that go back along the cleaned stroke: where the path
     doubles back (around a node, at a junction), its Gaussians in visiting order would fold the rod
     onto itself (`_core.forward_along_stroke`)."""
-    uv, z = camera.project(means[ids])
-    radius_px = radius * camera.fx / np.maximum(z, 1e-12)
+    uv, _, radius_px = _on_screen(camera, means[ids], radius)
     keep = _core.forward_along_stroke(
         np.ascontiguousarray(uv, np.float32), np.ascontiguousarray(radius_px, np.float32), stroke
     )

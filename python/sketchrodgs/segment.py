@@ -31,7 +31,7 @@ Gaussians); the NumPy implementation it replaced is the test oracle
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -141,7 +141,7 @@ def segment_and_bind(
     if attach:
         binding = _with_continuations(binding, polyline, means, radius, continuation_size)
         binding = _with_strays(binding, polyline, means, radius, attach_size)
-    return Binding(rows[binding.gaussian_ids], *(getattr(binding, f) for f in list(Binding.__dataclass_fields__)[1:]))
+    return replace(binding, gaussian_ids=rows[binding.gaussian_ids])
 
 
 def _reach(radius: float, grow: float, attach_size: float, continuation_size: float) -> float:

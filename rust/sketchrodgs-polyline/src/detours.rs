@@ -24,9 +24,9 @@ pub struct DetourLimits {
 }
 
 /// The stretches `(i, j)` (points `i` and `j` kept, those between to go onto the chord) of the
-/// axis `points`, seen on screen at `uv` with `radius_px` the radius in pixels at each point:
-/// from the first point on, the farthest-reaching detour starting there, then on from its end.
-/// Points whose projection is not finite are never in a detour in depth.
+/// axis `points`, seen on screen at `uv` with `radius_px` the radius in pixels at each point, in
+/// order: of overlapping detours the one that saves the most arc over its chord. Points whose
+/// projection is not finite are never in a detour in depth.
 pub fn detours(
     points: &[[f64; 3]],
     uv: &[[f64; 2]],
@@ -39,9 +39,8 @@ pub fn detours(
     for k in 1..n {
         arc[k] = arc[k - 1] + distance(&points[k - 1], &points[k]) / radius;
     }
-    // every detour, the farthest-reaching first and, of those reaching about as far, the shortest
-    // (a detour taken with a stretch of the line on either side, or cut short on its slopes,
-    // reaches no farther)
+    // every detour, the one saving the most arc first (the whole excursion, not part of it with a
+    // stub left) and, of those saving as much, the shortest (no stretch of the line either side)
     let mut all: Vec<(f64, usize, usize)> = Vec::new();
     for i in 0..n.saturating_sub(2) {
         all.extend(detours_from(i, points, uv, radius_px, radius, &arc, limits));
@@ -62,8 +61,8 @@ pub fn detours(
     found
 }
 
-/// Each detour starting at point `i`: (how far it leaves its chord less `ARC_WEIGHT` times its
-/// arc, in radii; `i`; its last point).
+/// Each detour starting at point `i`: (the arc it saves over its chord, less `ARC_WEIGHT` times
+/// its arc, in radii; `i`; its last point).
 fn detours_from(
     i: usize,
     points: &[[f64; 3]],
@@ -85,7 +84,8 @@ fn detours_from(
         let aside = (i + 1..j).map(|m| chord_distance(&uv[i], &uv[j], &uv[m])).fold(0.0, max_or_nan);
         // a NaN (a point behind the camera) is never on the line
         let on_line = aside / radius_px[i] < limits.screen;
-        let doubles_back = arc[j] - arc[i] >= limits.back_ratio * distance(&points[i], &points[j]) / radius;
+        let (along, chord) = (arc[j] - arc[i], distance(&points[i], &points[j]) / radius);
+        let doubles_back = along >= limits.back_ratio * chord;
         let least = match (on_line, doubles_back) {
             (true, true) => limits.depth.min(limits.back),
             (true, false) => limits.depth,
@@ -94,14 +94,14 @@ fn detours_from(
         };
         let far = (i + 1..j).map(|m| chord_distance(&points[i], &points[j], &points[m])).fold(0.0, max_or_nan) / radius;
         if far > least {
-            found.push(((1.0 - ARC_WEIGHT) * (arc[j] - arc[i]) - distance(&points[i], &points[j]) / radius, i, j));
+            found.push(((1.0 - ARC_WEIGHT) * along - chord, i, j));
         }
     }
     found
 }
 
-/// Of two detours, the one reaching farther is taken unless the other is this many radii of arc
-/// shorter for each radius it reaches less.
+/// Of two detours saving as much arc, the shorter is taken: each radius of arc costs this much of
+/// the saving.
 const ARC_WEIGHT: f64 = 0.01;
 
 /// The larger of the two, NaN if either is (`f64::max` drops a NaN).

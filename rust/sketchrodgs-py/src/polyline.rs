@@ -201,8 +201,16 @@ fn detours<'py>(
     check_shape("points", points.shape(), &[None, Some(3)])?;
     check_shape("uv", uv.shape(), &[Some(m), Some(2)])?;
     check_shape("radius_px", radius_px.shape(), &[Some(m)])?;
-    let limits = [("radius", radius), ("span", span), ("depth", depth), ("screen", screen), ("back_ratio", back_ratio)];
-    for (name, value) in limits.into_iter().chain([("back", back), ("end", end)]) {
+    let limits = [
+        ("radius", radius),
+        ("span", span),
+        ("depth", depth),
+        ("screen", screen),
+        ("back_ratio", back_ratio),
+        ("back", back),
+        ("end", end),
+    ];
+    for (name, value) in limits {
         if !(value.is_finite() && value > 0.0) {
             return Err(SketchRodGSError::new_err(format!("{name}: must be finite and > 0, got {value}")));
         }
