@@ -97,6 +97,23 @@ def test_an_end_run_off_the_axis_for_radii_is_cut_at_its_corner_and_a_bend_is_ke
         np.testing.assert_array_equal(pl.cut_hooked_ends(kept, R), kept)
 
 
+def test_an_end_run_onto_something_in_front_and_back_is_cut_where_it_rejoins_the_axis():
+    # Seen from the side: the axis along x, but its last 14 R (the stroke's end, where the part
+    # passes behind a leaf) run 3 R along the part, 6.4 R out onto the leaf in front and 5 R back.
+    # The sharpest corner is on the leaf; cut there, the leaf's leg back to the part would be the
+    # new end, so it is judged again and goes too.
+    corners = np.array([[0, 0], [3, 0], [8, -4], [11, 0], [40, 0]], float) * R
+    pieces = [
+        np.linspace(a, b, int(round(np.linalg.norm(b - a) / (R / 2))) + 1)[:-1] for a, b in zip(corners, corners[1:])
+    ]
+    side = np.vstack([*pieces, corners[-1:]])
+    run = np.stack([side[:, 0], np.zeros(len(side)), side[:, 1]], axis=1)
+    for drawn in (run, run[::-1]):
+        cut = pl.cut_hooked_ends(drawn, R)
+        assert np.abs(cut[:, 2]).max() < 0.6 * R, np.abs(cut[:, 2]).max()
+        assert pl.polyline_length(cut) > 28 * R
+
+
 def _seen_from(points: np.ndarray, eye_z: float = -1.0, focal: float = 800.0) -> tuple[np.ndarray, np.ndarray]:
     """Pixels of `points` for a pinhole at (0, 0, eye_z) looking along +z, and R in pixels there."""
     depth = points[:, 2] - eye_z

@@ -27,7 +27,6 @@ MISSES = {
     "jitter": {
         "donut_sprinkle_b",
         "guitar_stand_leg_left",
-        "guitar_stand_leg_right",
         "plant_main_stem",
         "plant_side_stem_left",
         "plant_side_stem_long",

@@ -36,6 +36,8 @@ _CORNER_BEFORE = 2.0
 _CORNER_AFTER = 4.0
 _CORNER_REACH = 10.0
 _CORNER_LEAST = 20.0
+# hooks and corners are cut again while a round cuts, at most this many rounds
+_CUT_ROUNDS = 3
 # bridge_detours: the longest stretch bridged; how far it leaves its chord in depth and how little
 # on screen; how many times its chord its arc is where it doubles back, and how far it then leaves
 # the chord; how far from the ends it lies (ends are cut_hooked_ends'). In radii but the ratio.
@@ -145,7 +147,8 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
     after it (to `_HOOK_INWARD`), those radii go, up to `_HOOK_CUTS` times an end. A slender part
     seldom turns that sharply within a radius or two of its end: the hook is mostly the path
     stepping onto what the part touches there (a bud, a leaf's base, the body a leg stands on).
-    Axes shorter than `_HOOK_INWARD + _HOOK_REACH` radii are left alone.
+    Axes shorter than `_HOOK_INWARD + _HOOK_REACH` radii are left alone. Then the corners
+    (`_uncornered`); where a round cut anything, the new ends are judged again.
 
     Args:
         points: (M, 3) axis points in order.
@@ -155,12 +158,19 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
         (K, 3) float64, the points kept (K <= M).
     """
     points = np.array(points, np.float64)
-    for _ in range(_HOOK_CUTS):
-        kept = _unhooked(points, radius)
-        if len(kept) == len(points):
+    # A corner cut can leave the run's other leg as the new end (the path stepped from the part onto
+    # a leaf in front near the end and back): judged again, at most `_CUT_ROUNDS` times.
+    for _ in range(_CUT_ROUNDS):
+        count = len(points)
+        for _ in range(_HOOK_CUTS):
+            kept = _unhooked(points, radius)
+            if len(kept) == len(points):
+                break
+            points = kept
+        points = _uncornered(points, radius)
+        if len(points) == count:
             break
-        points = kept
-    return _uncornered(points, radius)
+    return points
 
 
 def _uncornered(points: np.ndarray, radius: float) -> np.ndarray:
