@@ -43,6 +43,8 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
         distance: Vec::new(),
         arc: Vec::new(),
     };
+    // surely beyond the band, without a square root (the margin covers the rounding)
+    let beyond2 = band_px * band_px * 1.001 + 1e-6;
     for i in 0..stroke.segment_count() {
         let (a, b) = (stroke.points[i], stroke.points[i + 1]);
         let ab = [b[0] - a[0], b[1] - a[1]];
@@ -55,17 +57,21 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
         for row in y0..=y1 {
             for col in x0..=x1 {
                 let p = row * image.width + col;
-                if image.id_at(p) < 0 {
-                    continue;
-                }
                 let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
                 let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
-                if (image.depth(p) - stroke.depth_at(i, t)).abs() > depth_gap {
+                let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
+                let d2 = dx * dx + dy * dy;
+                if d2 > beyond2 {
                     continue;
                 }
-                let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
-                let d = (dx * dx + dy * dy).sqrt();
-                if d > band_px {
+                let d = d2.sqrt();
+                // the image is read only where the label could change: the boxes overlap, and most
+                // of a box lies beyond the band or nearer an earlier segment
+                if d > band_px || band.node_of_pixel[p] != NO_NODE && band.distance[band.node_of_pixel[p] as usize] <= d
+                {
+                    continue;
+                }
+                if image.id_at(p) < 0 || (image.depth(p) - stroke.depth_at(i, t)).abs() > depth_gap {
                     continue;
                 }
                 match band.node_of_pixel[p] {

@@ -197,6 +197,8 @@ struct Search<'a> {
     params: &'a TraceParams,
     /// Centre of the Gaussian under each node, in f64 for the cost sums.
     centre: Vec<[f64; 3]>,
+    /// The camera z of each node's pixel (read once: the image's reads go through its layers).
+    depth: Vec<f32>,
     /// Extra cost per pixel step onto each node for a surface much wider than the part.
     wide: Vec<f64>,
     /// No step between pixels whose depths differ by more (`crate::depth_gap`).
@@ -216,13 +218,15 @@ impl<'a> Search<'a> {
         gap: f32,
     ) -> Self {
         let centre = band.pixel.iter().map(|&p| centres[image.id_at(p as usize) as usize].map(f64::from)).collect();
+        let depth: Vec<f32> = band.pixel.iter().map(|&p| image.depth(p as usize)).collect();
         let n = band.len();
-        let wide = wide_penalty(image, band, stroke, params);
+        let wide = wide_penalty(image, band, stroke, params, &depth);
         Self {
             image,
             band,
             params,
             centre,
+            depth,
             wide,
             gap,
             cost: vec![f64::INFINITY; n],
@@ -276,7 +280,7 @@ impl<'a> Search<'a> {
                 let length2 = (ca[0] - cb[0]).powi(2) + (ca[1] - cb[1]).powi(2) + (ca[2] - cb[2]).powi(2);
                 // a depth gap: never step onto another surface. Depth, not centre distance: on real
                 // captures neighbouring pixels' Gaussians can be big and far apart sideways.
-                let (za, zb) = (self.image.depth(pixel), self.image.depth(self.band.pixel[b] as usize));
+                let (za, zb) = (self.depth[a], self.depth[b]);
                 if (za - zb).abs() > self.gap {
                     continue;
                 }
@@ -318,7 +322,13 @@ pub(crate) const WALK_RADII: f32 = 8.0;
 /// all zero when the focal length is unknown. One walk across the stroke measures the surface's
 /// run, and every band pixel of that run takes its width: a part 20 pixels wide is walked once
 /// per line, not twenty times.
-fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &TraceParams) -> Vec<f64> {
+fn wide_penalty(
+    image: &IndexImage,
+    band: &Band,
+    stroke: &CleanStroke,
+    params: &TraceParams,
+    depth: &[f32],
+) -> Vec<f64> {
     let focal = params.focal_px;
     if focal <= 0.0 {
         return vec![0.0; band.len()];
@@ -340,9 +350,7 @@ fn wide_penalty(image: &IndexImage, band: &Band, stroke: &CleanStroke, params: &
             }
         }
     }
-    (0..band.len())
-        .map(|node| WIDE_WEIGHT * f64::from(excess[node]) * f64::from(image.depth(band.pixel[node] as usize) / focal))
-        .collect()
+    (0..band.len()).map(|node| WIDE_WEIGHT * f64::from(excess[node]) * f64::from(depth[node] / focal)).collect()
 }
 
 /// Pixels within `cover_px` of any path pixel found so far.
