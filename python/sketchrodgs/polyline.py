@@ -14,9 +14,10 @@ from scipy.linalg import solveh_banded
 from . import _core
 
 # The axis is fitted this many times, each with weights from the last fit's residuals (Tukey's
-# biweight, zero past `_TUKEY_RADII` radii).
+# biweight, zero past `_TUKEY_RADII` radii: at 1.5 the pull of a leaf's base at a node or of the
+# limb a branch joins bent the axis by 1-2 R; docs/extraction.md, "Polyline").
 _ROBUST_FITS = 4
-_TUKEY_RADII = 1.5
+_TUKEY_RADII = 1.3
 
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
