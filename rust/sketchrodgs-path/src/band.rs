@@ -96,3 +96,112 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
     }
     band
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::stroke::clean_stroke;
+
+    /// The labelling as first written: every pixel of each segment's box read, then judged.
+    fn label_band_reading_every_pixel(image: &IndexImage, stroke: &CleanStroke, band_px: f32, gap: f32) -> Band {
+        let mut band = Band {
+            node_of_pixel: vec![NO_NODE; image.width * image.height],
+            pixel: Vec::new(),
+            segment: Vec::new(),
+            distance: Vec::new(),
+            arc: Vec::new(),
+        };
+        for i in 0..stroke.segment_count() {
+            let (a, b) = (stroke.points[i], stroke.points[i + 1]);
+            let ab = [b[0] - a[0], b[1] - a[1]];
+            let length2 = ab[0] * ab[0] + ab[1] * ab[1];
+            let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
+            let (x0, x1) =
+                (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
+            let (y0, y1) = (
+                clip(a[1].min(b[1]) - band_px - 1.0, image.height),
+                clip(a[1].max(b[1]) + band_px + 1.0, image.height),
+            );
+            for row in y0..=y1 {
+                for col in x0..=x1 {
+                    let p = row * image.width + col;
+                    if image.id_at(p) < 0 {
+                        continue;
+                    }
+                    let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
+                    let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
+                    if (image.depth(p) - stroke.depth_at(i, t)).abs() > gap {
+                        continue;
+                    }
+                    let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
+                    let d = (dx * dx + dy * dy).sqrt();
+                    if d > band_px {
+                        continue;
+                    }
+                    match band.node_of_pixel[p] {
+                        NO_NODE => {
+                            band.node_of_pixel[p] = band.pixel.len() as u32;
+                            band.pixel.push(p as u32);
+                            band.segment.push(i as u32);
+                            band.distance.push(d);
+                            band.arc.push(stroke.arc_at(i, t));
+                        }
+                        node if d < band.distance[node as usize] => {
+                            let node = node as usize;
+                            band.segment[node] = i as u32;
+                            band.distance[node] = d;
+                            band.arc[node] = stroke.arc_at(i, t);
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        band
+    }
+
+    #[test]
+    fn the_band_is_the_one_got_by_reading_every_pixel() {
+        // a wavy rope at depth 5 crossing a bar at depth 3 in front, on an image with holes; a
+        // stroke that wanders off the rope and back, with fractional band widths
+        let (width, height) = (96, 64);
+        let mut index = vec![-1; width * height];
+        let mut depth = vec![0.0f32; width * height];
+        for row in 0..height {
+            for col in 0..width {
+                let centre = 32.0 + 8.0 * (col as f32 / 9.0).sin();
+                let p = row * width + col;
+                if (40..46).contains(&col) {
+                    (index[p], depth[p]) = (p as i32, 3.0);
+                } else if (row as f32 - centre).abs() < 3.5 && (col * 7 + row) % 11 != 0 {
+                    (index[p], depth[p]) = (p as i32, 5.0 + 0.01 * col as f32);
+                }
+            }
+        }
+        let image = IndexImage::new(width, height, &index, &depth).unwrap();
+        let stroke: Vec<[f32; 2]> = (0..40)
+            .map(|k| 2.0 + 2.3 * k as f32)
+            .map(|x| [x, 32.0 + 9.0 * (x / 9.0).sin() + (x * 1.7).cos()])
+            .collect();
+        for band_px in [2.5, 6.0, 9.6] {
+            let clean = clean_stroke(&image, &stroke, band_px, 0.3, 100.0, None).unwrap();
+            let (ours, reference) = (
+                label_band(&image, &clean, band_px, 0.3),
+                label_band_reading_every_pixel(&image, &clean, band_px, 0.3),
+            );
+            assert!(ours.len() > 100);
+            assert_eq!(ours.node_of_pixel, reference.node_of_pixel);
+            assert_eq!(ours.pixel, reference.pixel);
+            assert_eq!(ours.segment, reference.segment);
+            assert_eq!(
+                ours.distance.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
+                reference.distance.iter().map(|d| d.to_bits()).collect::<Vec<_>>()
+            );
+            assert_eq!(
+                ours.arc.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
+                reference.arc.iter().map(|d| d.to_bits()).collect::<Vec<_>>()
+            );
+        }
+    }
+}
