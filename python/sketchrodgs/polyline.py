@@ -163,12 +163,7 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
     # a leaf in front near the end and back): judged again, at most `_CUT_ROUNDS` times.
     for _ in range(_CUT_ROUNDS):
         count = len(points)
-        for _ in range(_HOOK_CUTS):
-            kept = _unhooked(points, radius)
-            if len(kept) == len(points):
-                break
-            points = kept
-        points = _uncornered(points, radius)
+        points = _uncornered(_unhooked(points, radius), radius)
         if len(points) == count:
             break
     return points
@@ -237,6 +232,16 @@ def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px:
 
 
 def _unhooked(points: np.ndarray, radius: float) -> np.ndarray:
+    """`points` less the first `_HOOK_REACH` radii of each end that hooks, up to `_HOOK_CUTS` times."""
+    for _ in range(_HOOK_CUTS):
+        kept = _hook_cut(points, radius)
+        if len(kept) == len(points):
+            break
+        points = kept
+    return points
+
+
+def _hook_cut(points: np.ndarray, radius: float) -> np.ndarray:
     """`points` less the first `_HOOK_REACH` radii of each end that hooks (one cut an end)."""
     keep = [0, len(points)]
     if polyline_length(points) < (_HOOK_INWARD + _HOOK_REACH) * radius:

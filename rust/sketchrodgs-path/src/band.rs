@@ -22,6 +22,16 @@ pub(crate) struct Band {
 }
 
 impl Band {
+    fn empty(pixels: usize) -> Self {
+        Self {
+            node_of_pixel: vec![NO_NODE; pixels],
+            pixel: Vec::new(),
+            segment: Vec::new(),
+            distance: Vec::new(),
+            arc: Vec::new(),
+        }
+    }
+
     pub fn node(&self, pixel: usize) -> Option<usize> {
         let node = self.node_of_pixel[pixel];
         (node != NO_NODE).then_some(node as usize)
@@ -30,69 +40,83 @@ impl Band {
     pub fn len(&self) -> usize {
         self.pixel.len()
     }
+
+    /// Whether `pixel` is labelled already with a segment at most `distance` away.
+    fn labelled_within(&self, pixel: usize, distance: f32) -> bool {
+        self.node(pixel).is_some_and(|node| self.distance[node] <= distance)
+    }
+
+    /// Label `pixel` with `segment` at `distance` (and `arc`) unless a segment at most as far has it:
+    /// strict, so at a shared vertex the earlier segment keeps the pixel.
+    fn offer(&mut self, pixel: usize, segment: usize, distance: f32, arc: f32) {
+        match self.node(pixel) {
+            None => {
+                self.node_of_pixel[pixel] = self.pixel.len() as u32;
+                self.pixel.push(pixel as u32);
+                self.segment.push(segment as u32);
+                self.distance.push(distance);
+                self.arc.push(arc);
+            }
+            Some(node) if distance < self.distance[node] => {
+                self.segment[node] = segment as u32;
+                self.distance[node] = distance;
+                self.arc[node] = arc;
+            }
+            Some(_) => {}
+        }
+    }
+}
+
+/// Calls `visit(pixel, t, d²)` for every pixel of segment `i`'s bounding box grown by `band_px`:
+/// `t` the parameter of the nearest point on the segment to the pixel's centre, `d²` the squared
+/// distance to it.
+fn scan_segment(
+    image: &IndexImage,
+    stroke: &CleanStroke,
+    i: usize,
+    band_px: f32,
+    mut visit: impl FnMut(usize, f32, f32),
+) {
+    let (a, b) = (stroke.points[i], stroke.points[i + 1]);
+    let ab = [b[0] - a[0], b[1] - a[1]];
+    let length2 = ab[0] * ab[0] + ab[1] * ab[1];
+    let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
+    let (x0, x1) =
+        (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
+    let (y0, y1) =
+        (clip(a[1].min(b[1]) - band_px - 1.0, image.height), clip(a[1].max(b[1]) + band_px + 1.0, image.height));
+    for row in y0..=y1 {
+        for col in x0..=x1 {
+            let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
+            let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
+            let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
+            visit(row * image.width + col, t, dx * dx + dy * dy);
+        }
+    }
 }
 
 /// Label each object pixel within `band_px` of the stroke with its nearest segment among those where
 /// the object's expected depth (the clean stroke's depth, interpolated) is within `depth_gap` of the
 /// pixel's `Z`. Each segment scans only its own bounding box.
 pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32, depth_gap: f32) -> Band {
-    let mut band = Band {
-        node_of_pixel: vec![NO_NODE; image.width * image.height],
-        pixel: Vec::new(),
-        segment: Vec::new(),
-        distance: Vec::new(),
-        arc: Vec::new(),
-    };
+    let mut band = Band::empty(image.width * image.height);
     // surely beyond the band, without a square root (the margin covers the rounding)
     let beyond2 = band_px * band_px * 1.001 + 1e-6;
     for i in 0..stroke.segment_count() {
-        let (a, b) = (stroke.points[i], stroke.points[i + 1]);
-        let ab = [b[0] - a[0], b[1] - a[1]];
-        let length2 = ab[0] * ab[0] + ab[1] * ab[1];
-        let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
-        let (x0, x1) =
-            (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
-        let (y0, y1) =
-            (clip(a[1].min(b[1]) - band_px - 1.0, image.height), clip(a[1].max(b[1]) + band_px + 1.0, image.height));
-        for row in y0..=y1 {
-            for col in x0..=x1 {
-                let p = row * image.width + col;
-                let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
-                let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
-                let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
-                let d2 = dx * dx + dy * dy;
-                if d2 > beyond2 {
-                    continue;
-                }
-                let d = d2.sqrt();
-                // the image is read only where the label could change: the boxes overlap, and most
-                // of a box lies beyond the band or nearer an earlier segment
-                if d > band_px || band.node_of_pixel[p] != NO_NODE && band.distance[band.node_of_pixel[p] as usize] <= d
-                {
-                    continue;
-                }
-                if image.id_at(p) < 0 || (image.depth(p) - stroke.depth_at(i, t)).abs() > depth_gap {
-                    continue;
-                }
-                match band.node_of_pixel[p] {
-                    NO_NODE => {
-                        band.node_of_pixel[p] = band.pixel.len() as u32;
-                        band.pixel.push(p as u32);
-                        band.segment.push(i as u32);
-                        band.distance.push(d);
-                        band.arc.push(stroke.arc_at(i, t));
-                    }
-                    // strict: at a shared vertex the earlier segment keeps the pixel
-                    node if d < band.distance[node as usize] => {
-                        let node = node as usize;
-                        band.segment[node] = i as u32;
-                        band.distance[node] = d;
-                        band.arc[node] = stroke.arc_at(i, t);
-                    }
-                    _ => {}
-                }
+        scan_segment(image, stroke, i, band_px, |p, t, d2| {
+            if d2 > beyond2 {
+                return;
             }
-        }
+            let d = d2.sqrt();
+            // the image is read only where the label could change: the boxes overlap, and most
+            // of a box lies beyond the band or nearer an earlier segment
+            if d > band_px || band.labelled_within(p, d) {
+                return;
+            }
+            if image.id_at(p) >= 0 && (image.depth(p) - stroke.depth_at(i, t)).abs() <= depth_gap {
+                band.offer(p, i, d, stroke.arc_at(i, t));
+            }
+        });
     }
     band
 }
@@ -105,58 +129,17 @@ mod tests {
 
     /// The labelling as first written: every pixel of each segment's box read, then judged.
     fn label_band_reading_every_pixel(image: &IndexImage, stroke: &CleanStroke, band_px: f32, gap: f32) -> Band {
-        let mut band = Band {
-            node_of_pixel: vec![NO_NODE; image.width * image.height],
-            pixel: Vec::new(),
-            segment: Vec::new(),
-            distance: Vec::new(),
-            arc: Vec::new(),
-        };
+        let mut band = Band::empty(image.width * image.height);
         for i in 0..stroke.segment_count() {
-            let (a, b) = (stroke.points[i], stroke.points[i + 1]);
-            let ab = [b[0] - a[0], b[1] - a[1]];
-            let length2 = ab[0] * ab[0] + ab[1] * ab[1];
-            let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
-            let (x0, x1) =
-                (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
-            let (y0, y1) = (
-                clip(a[1].min(b[1]) - band_px - 1.0, image.height),
-                clip(a[1].max(b[1]) + band_px + 1.0, image.height),
-            );
-            for row in y0..=y1 {
-                for col in x0..=x1 {
-                    let p = row * image.width + col;
-                    if image.id_at(p) < 0 {
-                        continue;
-                    }
-                    let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
-                    let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
-                    if (image.depth(p) - stroke.depth_at(i, t)).abs() > gap {
-                        continue;
-                    }
-                    let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
-                    let d = (dx * dx + dy * dy).sqrt();
-                    if d > band_px {
-                        continue;
-                    }
-                    match band.node_of_pixel[p] {
-                        NO_NODE => {
-                            band.node_of_pixel[p] = band.pixel.len() as u32;
-                            band.pixel.push(p as u32);
-                            band.segment.push(i as u32);
-                            band.distance.push(d);
-                            band.arc.push(stroke.arc_at(i, t));
-                        }
-                        node if d < band.distance[node as usize] => {
-                            let node = node as usize;
-                            band.segment[node] = i as u32;
-                            band.distance[node] = d;
-                            band.arc[node] = stroke.arc_at(i, t);
-                        }
-                        _ => {}
-                    }
+            scan_segment(image, stroke, i, band_px, |p, t, d2| {
+                if image.id_at(p) < 0 || (image.depth(p) - stroke.depth_at(i, t)).abs() > gap {
+                    return;
                 }
-            }
+                let d = d2.sqrt();
+                if d <= band_px {
+                    band.offer(p, i, d, stroke.arc_at(i, t));
+                }
+            });
         }
         band
     }
