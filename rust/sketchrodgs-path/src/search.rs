@@ -372,11 +372,12 @@ impl CoverMask {
         for &p in pixels {
             let (col, row) = ((p % self.width) as i64, (p / self.width) as i64);
             for y in (row - r).max(0)..=(row + r).min(self.height as i64 - 1) {
-                for x in (col - r).max(0)..=(col + r).min(self.width as i64 - 1) {
-                    if ((x - col).pow(2) + (y - row).pow(2)) as f32 <= r2 {
-                        self.mask[y as usize * self.width + x as usize] = true;
-                    }
-                }
+                // the disc's half-width on this row: the largest dx with dx² + dy² within r²
+                let dy2 = (y - row).pow(2);
+                let Some(half) = (0..=r).rev().find(|dx| (dx * dx + dy2) as f32 <= r2) else { continue };
+                let (low, high) = ((col - half).max(0) as usize, (col + half).min(self.width as i64 - 1) as usize);
+                let start = y as usize * self.width;
+                self.mask[start + low..=start + high].fill(true);
             }
         }
     }
@@ -414,5 +415,30 @@ impl CoverMask {
             }
         }
         if total > 0.0 { (hit / total) as f32 } else { 0.0 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cover_mask_stamps_the_pixels_within_its_radius() {
+        // radii whole and not, path pixels in the middle and at the image's edges
+        for radius in [0.5_f32, 3.0, 4.7, 10.0] {
+            let (width, height) = (23, 17);
+            let path = [0, 5 * width + 7, 8 * width + 22, 16 * width + 3];
+            let mut mask = CoverMask::new(width, height, radius);
+            mask.stamp(&path);
+            for y in 0..height as i64 {
+                for x in 0..width as i64 {
+                    let expected = path.iter().any(|&p| {
+                        let (col, row) = ((p % width) as i64, (p / width) as i64);
+                        ((x - col).pow(2) + (y - row).pow(2)) as f32 <= radius * radius
+                    });
+                    assert_eq!(mask.mask[y as usize * width + x as usize], expected, "radius {radius} at ({x}, {y})");
+                }
+            }
+        }
     }
 }

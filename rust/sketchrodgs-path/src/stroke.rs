@@ -489,17 +489,18 @@ fn surfaces_near(
             }
         }
     }
-    // by layer, then depth, ties in pixel order (the order of a stable sort of the scan), as one key;
-    // each layer is grouped on its own, so that a leaf sloping back towards a stem hidden behind it
-    // does not merge with the stem into one surface
-    pixels.sort_unstable_by_key(|&(z, _, p, layer)| {
-        ((layer as u128) << 96) | (u128::from(ordered_bits(z)) << 64) | p as u128
-    });
+    // by layer, then depth, ties in pixel order (the scan's order); each layer is grouped on its
+    // own, so that a leaf sloping back towards a stem hidden behind it does not merge with the
+    // stem into one surface
+    let order = depth_order(&pixels);
     // (depth of the nearest pixel, its distance, pixel count, that pixel, its layer)
     let mut surfaces: Vec<(f32, f32, usize, usize, usize)> = Vec::new();
-    for (i, &(z, d, p, layer)) in pixels.iter().enumerate() {
+    let mut last_z = f32::NAN;
+    for &i in &order {
+        let (z, d, p, layer) = pixels[i];
+        let previous_z = std::mem::replace(&mut last_z, z);
         match surfaces.last_mut() {
-            Some(s) if s.4 == layer && z - pixels[i - 1].0 <= split => {
+            Some(s) if s.4 == layer && z - previous_z <= split => {
                 s.2 += 1;
                 if d < s.1 {
                     (s.0, s.1, s.3) = (z, d, p);
@@ -542,6 +543,27 @@ fn surfaces_near(
 pub(crate) fn ordered_bits(z: f32) -> u32 {
     let bits = z.to_bits();
     if bits >> 31 == 1 { !bits } else { bits | 0x8000_0000 }
+}
+
+/// The positions of `pixels` (depth, distance, pixel, layer) by layer, then depth, then position.
+/// Sorted as one 64-bit key (a layer's 8 bits, the depth's 32, the position's 24), which takes a
+/// fifth of a trace's instructions less than a wider key; a disc too large for that (a band of
+/// thousands of pixels) takes a stable sort instead.
+fn depth_order(pixels: &[(f32, f32, usize, usize)]) -> Vec<usize> {
+    const POSITION_BITS: u32 = 24;
+    if pixels.len() >> POSITION_BITS == 0 && pixels.iter().all(|px| px.3 < 1 << 8) {
+        let mut keys: Vec<u64> = (pixels.iter().enumerate())
+            .map(|(i, &(z, _, _, layer))| {
+                ((layer as u64) << (32 + POSITION_BITS)) | (u64::from(ordered_bits(z)) << POSITION_BITS) | i as u64
+            })
+            .collect();
+        keys.sort_unstable();
+        keys.iter().map(|&key| (key & ((1 << POSITION_BITS) - 1)) as usize).collect()
+    } else {
+        let mut order: Vec<usize> = (0..pixels.len()).collect();
+        order.sort_by_key(|&i| (pixels[i].3, ordered_bits(pixels[i].0)));
+        order
+    }
 }
 
 /// The chain of (sample, surface) with the largest total score (returned with it) whose consecutive members agree in
@@ -618,6 +640,24 @@ mod tests {
         }
         chain.reverse();
         chain
+    }
+
+    #[test]
+    fn the_depth_order_is_a_stable_sort_by_layer_and_depth() {
+        // depths in few values (ties happen), on three layers, and once with a layer past the key's
+        // 8 bits, which takes the stable sort
+        let mut state = 777_u64;
+        let mut next = |n: u64| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) % n
+        };
+        for top_layer in [2, 300] {
+            let pixels: Vec<(f32, f32, usize, usize)> =
+                (0..500).map(|p| (next(40) as f32 * 0.25 - 3.0, 1.0, p, next(3) as usize * (top_layer / 2))).collect();
+            let mut expected: Vec<usize> = (0..pixels.len()).collect();
+            expected.sort_by(|&a, &b| pixels[a].3.cmp(&pixels[b].3).then(pixels[a].0.total_cmp(&pixels[b].0)));
+            assert_eq!(depth_order(&pixels), expected, "top layer {top_layer}");
+        }
     }
 
     #[test]
