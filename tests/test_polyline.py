@@ -158,3 +158,20 @@ def test_a_detour_in_depth_or_doubling_back_is_bridged_and_a_bend_is_kept():
     # too short to hold a stretch, and points in one place: unchanged, no division by zero
     for kept in (spiked[:2], np.zeros((30, 3))):
         np.testing.assert_array_equal(pl.bridge_detours(kept, R, *_seen_from(kept)), kept)
+
+
+def test_a_bump_out_and_back_into_line_is_bridged_and_a_bend_or_a_wave_is_kept():
+    # a straight axis 30 R along x, every R/2; from 10 R to 16 R it runs 2.5 R aside and back into
+    # line (the path onto a leaf pair's stalks at a node), seen from any side: bridged
+    x = np.arange(0, 30.01, 0.5) * R
+    tent = 2.5 * R * np.clip(1 - np.abs(x - 13 * R) / (3 * R), 0, None)
+    for bumped in (np.stack([x, tent, 0 * x], axis=1), np.stack([x, 0 * x, -tent], axis=1)):
+        bridged = pl.bridge_detours(bumped, R, *_seen_from(bumped))
+        assert np.abs(bridged[:, 1:]).max() < 1e-12
+        outside = (x < 9.9 * R) | (x > 16.1 * R)
+        np.testing.assert_array_equal(bridged[outside], bumped[outside])
+    # a bend of 40 degrees, and a wave 2 R high every 16 R: the part's own shape, kept
+    bend = np.stack([x, np.maximum(x - 13 * R, 0) * np.tan(np.radians(40)), 0 * x], axis=1)
+    wave = np.stack([x, 2 * R * np.sin(x / R * 2 * np.pi / 16), 0 * x], axis=1)
+    for kept in (bend, wave):
+        np.testing.assert_array_equal(pl.bridge_detours(kept, R, *_seen_from(kept)), kept)

@@ -26,8 +26,6 @@ MISSES = {
     "cross_estimated": {"donut_sprinkle_b", "tree_branch_tall"},
     "jitter": {
         "donut_sprinkle_b",
-        "plant_main_stem",
-        "plant_side_stem_left",
         "plant_side_stem_long",
         "plant_side_stem_right",
     },

@@ -98,6 +98,15 @@ def detours(
     back: float,
     end: float,
 ) -> npt.NDArray[np.int64]: ...
+def bumps(
+    points: npt.NDArray[np.float64],
+    radius: float,
+    span: float,
+    off: float,
+    angle_deg: float,
+    lead: float,
+    end: float,
+) -> npt.NDArray[np.int64]: ...
 def cross_section_centroids(
     axis: npt.NDArray[np.float64],
     tangents: npt.NDArray[np.float64],

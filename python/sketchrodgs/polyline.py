@@ -48,6 +48,13 @@ _DETOUR_SCREEN = 0.7
 _DETOUR_BACK_RATIO = 2.5
 _DETOUR_BACK = 3.0
 _DETOUR_END = 3.0
+# bridge_detours, bumps: the longest stretch, how far it leaves its chord, within what angle (deg)
+# of the chord the axis runs over how long a lead either side, how far from the ends it lies
+_BUMP_SPAN = 8.0
+_BUMP_OFF = 1.5
+_BUMP_ANGLE = 15.0
+_BUMP_LEAD = 3.0
+_BUMP_END = 3.0
 
 
 def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
@@ -205,6 +212,10 @@ def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px:
     within `_DETOUR_END` radii of an end are left to `cut_hooked_ends`. The search (in Rust) takes
     points about R apart.
 
+    Then the bumps: stretches of at most `_BUMP_SPAN` radii leaving their chord by more than
+    `_BUMP_OFF` radii where the axis runs within `_BUMP_ANGLE` degrees of that chord over
+    `_BUMP_LEAD` radii on both sides (the path ran onto a leaf pair's stalks at a node and back).
+
     Args:
         points: (M, 3) axis points in order, about R/2 apart.
         radius: R, the object's radius.
@@ -215,20 +226,35 @@ def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px:
         (M, 3) float64.
     """
     points = np.array(points, np.float64, order="C")
-    if len(points) < 3:
+    if len(points) < 3 or not polyline_length(points) > 0:
         return points
     uv = np.ascontiguousarray(uv, np.float64)
     radius_px = np.ascontiguousarray(radius_px, np.float64)
-    arc = arc_lengths(points)
-    if not arc[-1] > 0:
-        return points
-    # judged on points about R apart (a detour is several radii long), a quarter of the work at R / 2
-    every = np.arange(0, len(points), max(1, min(round(radius * (len(points) - 1) / arc[-1]), len(points))))
+    every = _about_radius_apart(points, radius)
     limits = (_DETOUR_SPAN, _DETOUR_DEPTH, _DETOUR_SCREEN, _DETOUR_BACK_RATIO, _DETOUR_BACK, _DETOUR_END)
-    for i, j in every[_core.detours(points[every], uv[every], radius_px[every], radius, *limits)]:
+    _onto_chords(points, every[_core.detours(points[every], uv[every], radius_px[every], radius, *limits)])
+    every = _about_radius_apart(points, radius)
+    bumps = _core.bumps(
+        np.ascontiguousarray(points[every]), radius, _BUMP_SPAN, _BUMP_OFF, _BUMP_ANGLE, _BUMP_LEAD, _BUMP_END
+    )
+    _onto_chords(points, every[bumps])
+    return points
+
+
+def _about_radius_apart(points: np.ndarray, radius: float) -> np.ndarray:
+    """Every k-th point's index, k chosen so that they lie about R apart (a detour or bump is
+    several radii long: a quarter of the work of points R / 2 apart)."""
+    length = polyline_length(points)
+    return np.arange(0, len(points), max(1, min(round(radius * (len(points) - 1) / length), len(points))))
+
+
+def _onto_chords(points: np.ndarray, stretches: np.ndarray) -> None:
+    """Put the points inside each stretch (i, j) onto its chord, spaced as they were along the arc
+    (in place)."""
+    arc = arc_lengths(points)
+    for i, j in stretches:
         along = (arc[i : j + 1] - arc[i]) / (arc[j] - arc[i])
         points[i + 1 : j] = points[i] + along[1:-1, None] * (points[j] - points[i])
-    return points
 
 
 def _unhooked(points: np.ndarray, radius: float) -> np.ndarray:

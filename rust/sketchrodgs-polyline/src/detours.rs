@@ -4,6 +4,11 @@
 //! it), or doubling back, their arc several times their chord (the path ran out onto a side
 //! branch or a leaf at a node and back). A part seldom does either within a few radii. The caller
 //! puts each stretch's points onto its chord.
+//!
+//! Bumps are a third kind, judged apart (`bumps`), after the detours are bridged: a short stretch
+//! that leaves its chord by more than a radius or so where the axis runs along that chord on both
+//! sides (the path ran onto the stalks of a leaf pair at a node and back). A bend changes the
+//! axis's direction, and a wave's sides are not in line, so neither is a bump.
 
 /// The limits of a detour, in radii.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,6 +102,74 @@ fn detours_from(
             found.push(((1.0 - ARC_WEIGHT) * along - chord, i, j));
         }
     }
+    found
+}
+
+/// The limits of a bump, in radii and degrees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BumpLimits {
+    /// The longest stretch (arc length).
+    pub span: f64,
+    /// A stretch is a bump where a point leaves its chord by more than this...
+    pub off: f64,
+    /// ... and the axis over `lead` before it and after it runs within this angle of the chord.
+    pub angle_deg: f64,
+    pub lead: f64,
+    /// Stretches start and end at least this far from the axis's ends.
+    pub end: f64,
+}
+
+/// The bumps `(i, j)` (points `i` and `j` kept, those between to go onto the chord) of the axis
+/// `points` (about R apart), in order: the one saving the most arc over its chord first, then each
+/// that shares no point with one taken.
+pub fn bumps(points: &[[f64; 3]], radius: f64, limits: BumpLimits) -> Vec<(usize, usize)> {
+    let n = points.len();
+    let mut arc = vec![0.0; n];
+    for k in 1..n {
+        arc[k] = arc[k - 1] + distance(&points[k - 1], &points[k]) / radius;
+    }
+    let last = arc.last().copied().unwrap_or(0.0);
+    let cos = limits.angle_deg.to_radians().cos();
+    let direction = |a: usize, b: usize| {
+        let d: [f64; 3] = std::array::from_fn(|k| points[b][k] - points[a][k]);
+        let length = distance(&points[a], &points[b]);
+        d.map(|x| if length > 0.0 { x / length } else { 0.0 })
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let mut all: Vec<(f64, usize, usize)> = Vec::new();
+    for i in 0..n {
+        if arc[i] < limits.end {
+            continue;
+        }
+        // the first point within `lead` before i
+        let before = arc.partition_point(|&a| a < arc[i] - limits.lead);
+        for j in i + 2..n {
+            if arc[j] - arc[i] > limits.span || arc[j] > last - limits.end {
+                break;
+            }
+            let off = (i + 1..j).map(|m| chord_distance(&points[i], &points[j], &points[m])).fold(0.0, f64::max);
+            let after = arc.partition_point(|&a| a < arc[j] + limits.lead).min(n - 1);
+            if off / radius <= limits.off || before >= i || after <= j {
+                continue;
+            }
+            let chord = direction(i, j);
+            if dot(direction(before, i), chord) >= cos && dot(direction(j, after), chord) >= cos {
+                all.push((arc[j] - arc[i] - distance(&points[i], &points[j]) / radius, i, j));
+            }
+        }
+    }
+    // stable: of bumps saving as much, the first found
+    all.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut used = vec![false; n];
+    let mut found = Vec::new();
+    for (_, i, j) in all {
+        if used[i..=j].iter().any(|&u| u) {
+            continue;
+        }
+        used[i..=j].fill(true);
+        found.push((i, j));
+    }
+    found.sort_unstable();
     found
 }
 
@@ -202,5 +275,38 @@ mod tests {
         points.extend((0..=20).rev().map(|k| [f64::from(k) * 0.5, 6.0, 0.0]));
         let (uv, radius_px) = flat(&points);
         assert!(detours(&points, &uv, &radius_px, 1.0, LIMITS).is_empty());
+    }
+
+    const BUMP: BumpLimits = BumpLimits { span: 8.0, off: 1.5, angle_deg: 15.0, lead: 3.0, end: 3.0 };
+
+    /// An axis along x every radius (R = 1), `side(x)` along y.
+    fn along_x(side: impl Fn(f64) -> f64) -> Vec<[f64; 3]> {
+        (0..41).map(f64::from).map(|x| [x, side(x), 0.0]).collect()
+    }
+
+    #[test]
+    fn a_stretch_out_and_back_into_line_is_a_bump_and_a_bend_a_wave_or_an_end_is_not() {
+        let tent =
+            |centre: f64, half: f64, height: f64| move |x: f64| height * (1.0 - (x - centre).abs() / half).max(0.0);
+        // 2.5 R out over 6 R, the axis straight either side: one bump, from where it leaves the line
+        // to where it returns
+        let points = along_x(tent(20.0, 3.0, 2.5));
+        assert_eq!(bumps(&points, 1.0, BUMP), vec![(17, 23)]);
+        // a bend of 40 degrees at x = 20: the axis before and after are not in line
+        let points = along_x(|x| (x - 20.0).max(0.0) * 40f64.to_radians().tan());
+        assert!(bumps(&points, 1.0, BUMP).is_empty());
+        // a wave 2 R high every 16 R: each crest leaves its chord, but its sides are not in line
+        let points = along_x(|x| 2.0 * (x * std::f64::consts::TAU / 16.0).sin());
+        assert!(bumps(&points, 1.0, BUMP).is_empty());
+        // 1.2 R out: the part's own wobble
+        let points = along_x(tent(20.0, 3.0, 1.2));
+        assert!(bumps(&points, 1.0, BUMP).is_empty());
+        // within 3 R of an end (left to the hooked ends), or wider than the span
+        assert!(bumps(&along_x(tent(2.0, 2.0, 2.5)), 1.0, BUMP).is_empty());
+        assert!(bumps(&along_x(tent(20.0, 5.0, 2.5)), 1.0, BUMP).is_empty());
+        // no points, one, all in one place
+        assert!(bumps(&[], 1.0, BUMP).is_empty());
+        assert!(bumps(&[[0.0; 3]], 1.0, BUMP).is_empty());
+        assert!(bumps(&[[0.0; 3]; 30], 1.0, BUMP).is_empty());
     }
 }

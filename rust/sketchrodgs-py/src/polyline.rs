@@ -5,7 +5,7 @@
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use sketchrodgs_polyline::continuation as past_end;
-use sketchrodgs_polyline::detours::DetourLimits;
+use sketchrodgs_polyline::detours::{BumpLimits, DetourLimits};
 use sketchrodgs_polyline::segment::{self, SegmentParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
@@ -226,6 +226,42 @@ fn detours<'py>(
         .into_pyarray(py))
 }
 
+/// The bumps of the axis `points` (M, 3) float64, about R apart (`sketchrodgs_polyline::detours::bumps`;
+/// the limits in radii, the angle in degrees): (K, 2) int64, each row the first and last point of
+/// a stretch to put onto its chord.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn bumps<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f64>>,
+    radius: f64,
+    span: f64,
+    off: f64,
+    angle_deg: f64,
+    lead: f64,
+    end: f64,
+) -> PyResult<Bound<'py, PyArray2<i64>>> {
+    let points = points.try_readonly()?;
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let limits =
+        [("radius", radius), ("span", span), ("off", off), ("angle_deg", angle_deg), ("lead", lead), ("end", end)];
+    for (name, value) in limits {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(SketchRodGSError::new_err(format!("{name}: must be finite and > 0, got {value}")));
+        }
+    }
+    let points: &[[f64; 3]] = contiguous(&points, "points")?.as_chunks::<3>().0;
+    if let Some(k) = points.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
+        return Err(SketchRodGSError::new_err(format!("points: row {k} is not finite")));
+    }
+    let limits = BumpLimits { span, off, angle_deg, lead, end };
+    let found = py.detach(|| sketchrodgs_polyline::detours::bumps(points, radius, limits));
+    let flat: Vec<i64> = found.iter().flat_map(|&(i, j)| [i as i64, j as i64]).collect();
+    Ok(numpy::ndarray::Array2::from_shape_vec((found.len(), 2), flat)
+        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?
+        .into_pyarray(py))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
@@ -233,5 +269,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rows_in_box, m)?)?;
     m.add_function(wrap_pyfunction!(continuation, m)?)?;
     m.add_function(wrap_pyfunction!(detours, m)?)?;
+    m.add_function(wrap_pyfunction!(bumps, m)?)?;
     Ok(())
 }
