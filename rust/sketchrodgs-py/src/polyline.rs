@@ -210,20 +210,13 @@ fn detours<'py>(
         ("back", back),
         ("end", end),
     ];
-    for (name, value) in limits {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(SketchRodGSError::new_err(format!("{name}: must be finite and > 0, got {value}")));
-        }
-    }
+    check_limits(&limits)?;
     let points: &[[f64; 3]] = contiguous(&points, "points")?.as_chunks::<3>().0;
     let uv: &[[f64; 2]] = contiguous(&uv, "uv")?.as_chunks::<2>().0;
     let radius_px = contiguous(&radius_px, "radius_px")?;
     let limits = DetourLimits { span, depth, screen, back_ratio, back, end };
     let found = py.detach(|| sketchrodgs_polyline::detours::detours(points, uv, radius_px, radius, limits));
-    let flat: Vec<i64> = found.iter().flat_map(|&(i, j)| [i as i64, j as i64]).collect();
-    Ok(numpy::ndarray::Array2::from_shape_vec((found.len(), 2), flat)
-        .map_err(|e| SketchRodGSError::new_err(e.to_string()))?
-        .into_pyarray(py))
+    stretches_array(py, &found)
 }
 
 /// The bumps of the axis `points` (M, 3) float64, about R apart (`sketchrodgs_polyline::detours::bumps`;
@@ -245,17 +238,26 @@ fn bumps<'py>(
     check_shape("points", points.shape(), &[None, Some(3)])?;
     let limits =
         [("radius", radius), ("span", span), ("off", off), ("angle_deg", angle_deg), ("lead", lead), ("end", end)];
-    for (name, value) in limits {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(SketchRodGSError::new_err(format!("{name}: must be finite and > 0, got {value}")));
-        }
-    }
+    check_limits(&limits)?;
     let points: &[[f64; 3]] = contiguous(&points, "points")?.as_chunks::<3>().0;
     if let Some(k) = points.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
         return Err(SketchRodGSError::new_err(format!("points: row {k} is not finite")));
     }
     let limits = BumpLimits { span, off, angle_deg, lead, end };
     let found = py.detach(|| sketchrodgs_polyline::detours::bumps(points, radius, limits));
+    stretches_array(py, &found)
+}
+
+/// Each named limit must be finite and positive.
+fn check_limits(limits: &[(&str, f64)]) -> PyResult<()> {
+    match limits.iter().find(|(_, value)| !(value.is_finite() && *value > 0.0)) {
+        Some((name, value)) => Err(SketchRodGSError::new_err(format!("{name}: must be finite and > 0, got {value}"))),
+        None => Ok(()),
+    }
+}
+
+/// Stretches `(i, j)` as a (K, 2) int64 array.
+fn stretches_array<'py>(py: Python<'py>, found: &[(usize, usize)]) -> PyResult<Bound<'py, PyArray2<i64>>> {
     let flat: Vec<i64> = found.iter().flat_map(|&(i, j)| [i as i64, j as i64]).collect();
     Ok(numpy::ndarray::Array2::from_shape_vec((found.len(), 2), flat)
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?
