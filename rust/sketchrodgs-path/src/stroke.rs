@@ -642,15 +642,20 @@ mod tests {
         chain
     }
 
+    /// A repeatable stream of numbers: each call gives one below its argument.
+    fn numbers_below(seed: u64) -> impl FnMut(u64) -> u64 {
+        let mut state = seed;
+        move |n| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) % n
+        }
+    }
+
     #[test]
     fn the_depth_order_is_a_stable_sort_by_layer_and_depth() {
         // depths in few values (ties happen), on three layers, and once with a layer past the key's
         // 8 bits, which takes the stable sort
-        let mut state = 777_u64;
-        let mut next = |n: u64| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 33) % n
-        };
+        let mut next = numbers_below(777_u64);
         for top_layer in [2, 300] {
             let pixels: Vec<(f32, f32, usize, usize)> =
                 (0..500).map(|p| (next(40) as f32 * 0.25 - 3.0, 1.0, p, next(3) as usize * (top_layer / 2))).collect();
@@ -663,11 +668,7 @@ mod tests {
     #[test]
     fn the_ranked_search_finds_the_chain_all_pairs_find() {
         // surfaces at a few depths, on and off in runs, with scores in quarter steps (ties happen)
-        let mut state = 12345_u64;
-        let mut next = |n: u64| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 33) % n
-        };
+        let mut next = numbers_below(12345_u64);
         for _ in 0..50 {
             let samples = 20 + next(80) as usize;
             let arc: Vec<f32> = (0..samples).map(|i| 3.0 * i as f32).collect();
