@@ -40,10 +40,7 @@ pub fn detours(
     limits: DetourLimits,
 ) -> Vec<(usize, usize)> {
     let n = points.len().min(uv.len()).min(radius_px.len());
-    let mut arc = vec![0.0; n];
-    for k in 1..n {
-        arc[k] = arc[k - 1] + distance(&points[k - 1], &points[k]) / radius;
-    }
+    let arc = arc_in_radii(&points[..n], radius);
     // every detour, the one saving the most arc first (the whole excursion, not part of it with a
     // stub left) and, of those saving as much, the shortest (no stretch of the line either side)
     let mut all: Vec<(f64, usize, usize)> = Vec::new();
@@ -124,10 +121,7 @@ pub struct BumpLimits {
 /// that shares no point with one taken.
 pub fn bumps(points: &[[f64; 3]], radius: f64, limits: BumpLimits) -> Vec<(usize, usize)> {
     let n = points.len();
-    let mut arc = vec![0.0; n];
-    for k in 1..n {
-        arc[k] = arc[k - 1] + distance(&points[k - 1], &points[k]) / radius;
-    }
+    let arc = arc_in_radii(points, radius);
     let last = arc.last().copied().unwrap_or(0.0);
     let cos = limits.angle_deg.to_radians().cos();
     let direction = |a: usize, b: usize| {
@@ -143,13 +137,16 @@ pub fn bumps(points: &[[f64; 3]], radius: f64, limits: BumpLimits) -> Vec<(usize
         }
         // the first point within `lead` before i
         let before = arc.partition_point(|&a| a < arc[i] - limits.lead);
+        if before >= i {
+            continue;
+        }
         for j in i + 2..n {
             if arc[j] - arc[i] > limits.span || arc[j] > last - limits.end {
                 break;
             }
             let off = (i + 1..j).map(|m| chord_distance(&points[i], &points[j], &points[m])).fold(0.0, f64::max);
             let after = arc.partition_point(|&a| a < arc[j] + limits.lead).min(n - 1);
-            if off / radius <= limits.off || before >= i || after <= j {
+            if off / radius <= limits.off || after <= j {
                 continue;
             }
             let chord = direction(i, j);
@@ -171,6 +168,15 @@ pub fn bumps(points: &[[f64; 3]], radius: f64, limits: BumpLimits) -> Vec<(usize
     }
     found.sort_unstable();
     found
+}
+
+/// The arc length at each point, in radii (0 at the first).
+fn arc_in_radii(points: &[[f64; 3]], radius: f64) -> Vec<f64> {
+    let mut arc = vec![0.0; points.len()];
+    for k in 1..points.len() {
+        arc[k] = arc[k - 1] + distance(&points[k - 1], &points[k]) / radius;
+    }
+    arc
 }
 
 /// Of two detours saving as much arc, the shorter is taken: each radius of arc costs this much of
