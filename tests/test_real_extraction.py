@@ -1,6 +1,7 @@
 """Extraction on real captures (tests/data/real_cases: 14 slender parts of the plant, guitar, tree
-and donut captures, 2-3 views each), scored as the issue asks, without a true axis: between views,
-against the reversed stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
+and donut captures, 2-3 views each, and 10 held-out parts of the same captures that no extraction
+was tuned on), scored as the issue asks, without a true axis: between views, against the reversed
+stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
 
 What holds on every case is asserted outright. The per-case geometric targets are asserted per
 case; where a case does not meet a target yet it is marked xfail(strict): the test then fails the
@@ -17,34 +18,61 @@ import pytest
 
 from sketchrodgs.realcases import TARGETS, load_cases, run_case, score_case
 
-CASES_FILE = Path(__file__).parent / "data" / "real_cases" / "cases.json"
+DATA = Path(__file__).parent / "data" / "real_cases"
+CASE_FILES = {"cases": DATA / "cases.json", "heldout": DATA / "heldout_cases.json"}
 JITTER = 10
 
-# Measured misses (see the module docstring).
+# Measured misses (see the module docstring), as "set/case".
 MISSES = {
-    "cross_given": set(),
-    "cross_estimated": {"donut_sprinkle_b", "tree_branch_tall"},
-    "jitter": {
-        "donut_sprinkle_b",
-        "plant_side_stem_long",
-        "plant_side_stem_right",
+    "cross_given": {"heldout/plant_petiole_right", "heldout/tree_finger_left", "heldout/donut_sprinkle_c"},
+    "cross_estimated": {
+        "cases/donut_sprinkle_b",
+        "cases/tree_branch_tall",
+        "heldout/plant_petiole_right",
+        "heldout/tree_finger_left",
+        "heldout/tree_branch_far_right",
+        "heldout/guitar_stand_foot_back",
     },
-    "radius": {"donut_sprinkle_b", "guitar_stand_leg_left", "guitar_stand_leg_right"},
+    "jitter": {
+        "cases/donut_sprinkle_b",
+        "cases/plant_side_stem_long",
+        "cases/plant_side_stem_right",
+        "heldout/plant_stem_back",
+        "heldout/plant_petiole_right",
+        "heldout/tree_branch_far_right",
+        "heldout/donut_sprinkle_c",
+        "heldout/donut_sprinkle_d",
+    },
+    "radius": {
+        "cases/donut_sprinkle_b",
+        "cases/guitar_stand_leg_left",
+        "cases/guitar_stand_leg_right",
+        "heldout/tree_branch_far_right",
+        "heldout/guitar_stand_foot_back",
+        "heldout/donut_sprinkle_d",
+    },
+    "end_gap": {"heldout/plant_petiole_right", "heldout/donut_sprinkle_c"},
+    "fold_back": {"heldout/plant_petiole_right", "heldout/donut_sprinkle_d"},
 }
 
 
 @pytest.fixture(scope="module")
 def scored():
-    scenes, cases = load_cases(CASES_FILE)
     results = {}
-    for case in cases:
-        views = run_case(scenes[case["scene"]], case, jitter=JITTER)
-        results[case["name"]] = (views, score_case(case, views))
+    for group, path in CASE_FILES.items():
+        scenes, cases = load_cases(path)
+        for case in cases:
+            views = run_case(scenes[case["scene"]], case, jitter=JITTER)
+            results[f"{group}/{case['name']}"] = (views, score_case(case, views))
     return results
 
 
 def _names() -> list[str]:
-    return [case["name"] for case in json.loads(CASES_FILE.read_text(encoding="utf-8"))["cases"]]
+    return [
+        f"{group}/{case['name']}"
+        for group, path in CASE_FILES.items()
+        for case in json.loads(path.read_text(encoding="utf-8"))["cases"]
+    ]
 
 
 def per_case(target: str):
@@ -74,22 +102,24 @@ def test_no_unjittered_stroke_fails(scored):
 def test_at_most_3_percent_of_jittered_strokes_fail(scored):
     failures = sum(score.jitter_failures for _, score in scored.values())
     count = sum(score.jitter_count for _, score in scored.values())
-    assert count >= 12 * 2 * JITTER
+    assert count >= 24 * 2 * JITTER
     assert failures <= TARGETS["jitter_fail_share"] * count, f"{failures} of {count} jittered strokes failed"
 
 
-def test_rods_reach_the_ends_of_their_paths(scored):
+@per_case("end_gap")
+def test_rods_reach_the_ends_of_their_paths(scored, name):
     """The rod covers what the stroke found: a rod cut short would pass the measures below, which
     compare rods only where they overlap."""
-    for name, (_, score) in scored.items():
-        assert score.end_gap <= TARGETS["end_gap"], (name, score.end_gap)
+    score = scored[name][1]
+    assert score.end_gap <= TARGETS["end_gap"], score.end_gap
 
 
-def test_no_rod_folds_back_along_its_stroke(scored):
+@per_case("fold_back")
+def test_no_rod_folds_back_along_its_stroke(scored, name):
     """Where the path doubles back (around a node, at a junction), the rod must not: a loop in the
     rest polyline is a loop in the simulated rod. Every extraction counts, jittered ones too."""
-    for name, (_, score) in scored.items():
-        assert score.fold_back <= TARGETS["fold_back"], (name, score.fold_back)
+    score = scored[name][1]
+    assert score.fold_back <= TARGETS["fold_back"], score.fold_back
 
 
 def test_the_reversed_stroke_gives_the_same_rod(scored):
