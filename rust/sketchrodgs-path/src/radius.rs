@@ -22,6 +22,11 @@ const CLUSTER_SHARE: f32 = 0.25;
 const COLOUR_SPREADS: f32 = 4.0;
 const COLOUR_RATIO: f32 = 2.0;
 const COLOUR_OFF_LEAST: f32 = 0.2;
+/// The colour widths are not taken where at least this share of the plain walks end on both sides
+/// where nothing is shown: the part is outlined against the background, and its plain widths are
+/// its silhouette's. A tree branch whose baked shading changes across it measured 2.3 x narrower by
+/// colour (0.52 R) where 31 of its 46 walks were outlined; a sprinkle on the icing has none.
+const OUTLINED_SHARE: f32 = 0.5;
 
 /// What [`estimate_radius`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,7 +58,7 @@ pub fn estimate_radius(
     let loose = clean_stroke(image, stroke, band_px, f32::INFINITY, 0.0, None)?;
     let under: Vec<Option<usize>> =
         loose.points.iter().map(|p| image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q))).collect();
-    let mut first = half_widths(image, &loose, &under, focal, max_px, None);
+    let (mut first, _) = half_widths(image, &loose, &under, focal, max_px, None);
     let Some(rough) = slender_cluster(&mut first) else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
     let gap = crate::depth_gap(image, stroke, rough, focal);
@@ -84,10 +89,10 @@ pub fn estimate_radius(
         .collect();
     // the part's colour, where the Gaussians' colours are known: the median at the anchors
     let colour = part_colour(image, &anchors);
-    let mut widths = half_widths(image, &clean, &anchors, focal, max_px, None);
+    let (mut widths, outlined) = half_widths(image, &clean, &anchors, focal, max_px, None);
     let mut radius = if widths.is_empty() { rough } else { median(&mut widths) };
-    if let Some(colour) = colour {
-        let mut in_colour = half_widths(image, &clean, &anchors, focal, max_px, Some(colour));
+    if let Some(colour) = colour.filter(|_| outlined < OUTLINED_SHARE) {
+        let (mut in_colour, _) = half_widths(image, &clean, &anchors, focal, max_px, Some(colour));
         let by_colour = if in_colour.is_empty() { radius } else { median(&mut in_colour) };
         if radius > COLOUR_RATIO * by_colour {
             radius = by_colour;
@@ -97,7 +102,8 @@ pub fn estimate_radius(
 }
 
 /// The half-widths in world units at the samples that have a pixel (walks stopping where the
-/// colour is off `colour`, if given).
+/// colour is off `colour`, if given), and the share of them outlined against the background on both
+/// sides (`Walks::outlined`).
 fn half_widths(
     image: &IndexImage,
     stroke: &CleanStroke,
@@ -105,14 +111,21 @@ fn half_widths(
     focal: f32,
     max_px: usize,
     colour: Option<([f32; 3], f32)>,
-) -> Vec<f32> {
+) -> (Vec<f32>, f32) {
     let mut walks = Walks::default();
-    pixels
+    let mut outlined = 0;
+    let widths: Vec<f32> = pixels
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
-        .map(|(p, &n)| 0.5 * walks.cross_width(image, p, n, focal, max_px, colour) as f32 * image.depth(p) / focal)
-        .collect()
+        .map(|(p, &n)| {
+            let width = walks.cross_width(image, p, n, focal, max_px, colour);
+            outlined += usize::from(walks.outlined());
+            0.5 * width as f32 * image.depth(p) / focal
+        })
+        .collect();
+    let share = outlined as f32 / widths.len().max(1) as f32;
+    (widths, share)
 }
 
 /// The part's colour and how far from it a Gaussian of the part may be: the per-channel median of

@@ -341,6 +341,31 @@ fn the_radius_of_a_rope_lying_on_a_floor_is_told_by_its_colour() {
 }
 
 #[test]
+fn the_radius_of_a_shaded_rope_against_the_background_is_its_silhouettes() {
+    // A rope 9 px thick (rows 16..=24) against nothing, whose Gaussians' colours change across it
+    // (light on top, dark below, as a capture's baked shading): by colour it would measure a few
+    // pixels, but every walk ends at its outline on both sides, so the plain width stands. The same
+    // rope lying on a grey floor at its own depth is told by its colour.
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let stroke = [[2.5, 20.5], [77.5, 20.5]];
+    let radius_with_colours = |scene: &Synthetic| {
+        // each Gaussian coloured by its pixel's row (its centre's y is (row + 0.5) z / focal)
+        let rows = scene.centres.iter().map(|c| (c[1] * FOCAL / c[2]) as usize);
+        let colours: Vec<[f32; 3]> = rows
+            .map(|row| if (16..=24).contains(&row) { [0.9 - 0.12 * (row - 16) as f32, 0.7, 0.2] } else { [0.5; 3] })
+            .collect();
+        let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
+        estimate_radius(&scene.image().with_colours(&ids, &colours).unwrap(), &stroke, &params).unwrap().radius
+    };
+    let alone = Synthetic::new(80, 40, FOCAL, |_, row| (16..=24).contains(&row).then_some(5.0));
+    let radius = radius_with_colours(&alone);
+    assert!((radius - 0.225).abs() < 0.02, "R = {radius} (the rope's half-width: 4.5 px at 5 / 100)");
+    let on_floor = Synthetic::new(80, 40, FOCAL, |_, _| Some(5.0));
+    let radius = radius_with_colours(&on_floor);
+    assert!(radius < 0.2, "on the floor the colour tells the rope from it: R = {radius}");
+}
+
+#[test]
 fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
     // A bar 15 px wide (rows 13..=27) whose depth rises by 2 px of world size per pixel across it
     // (seen at about 63 degrees), with the centres scattered in depth by up to 12 px, in front of a

@@ -22,6 +22,9 @@ const FAR_GAPS: f32 = 3.0;
 pub(crate) struct Walks {
     ways: [Vec<f32>; 2],
     pixels: [Vec<usize>; 2],
+    /// Per way, whether it first failed where nothing is shown (or at the image's edge): there the
+    /// part's silhouette bounds its width.
+    at_silhouette: [bool; 2],
 }
 
 impl Walks {
@@ -59,13 +62,19 @@ impl Walks {
         let z0 = image.depth(p);
         let gap = GAP_FLOOR_PX * z0 / focal_px;
         let far = FAR_GAPS * gap;
-        for ((walk, pixels), sign) in self.ways.iter_mut().zip(&mut self.pixels).zip([1.0_f32, -1.0]) {
+        for (((walk, pixels), silhouette), sign) in
+            self.ways.iter_mut().zip(&mut self.pixels).zip(&mut self.at_silhouette).zip([1.0_f32, -1.0])
+        {
             walk.clear();
             pixels.clear();
+            *silhouette = false;
             let (mut low, mut high, mut misses) = (z0, z0, 0);
             for k in 1..=max_px {
                 let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
-                let Some(q) = image.pixel_at(x, y) else { break };
+                let Some(q) = image.pixel_at(x, y) else {
+                    *silhouette |= misses == 0;
+                    break;
+                };
                 pixels.push(q);
                 if !image.known(q) {
                     // not rendered (a render of the band only): walk on, so that one more render
@@ -78,6 +87,9 @@ impl Walks {
                     walk.push(z);
                     (low, high, misses) = (low.min(z), high.max(z), 0);
                 } else {
+                    if misses == 0 {
+                        *silhouette = !image.covered(q);
+                    }
                     walk.push(f32::NAN);
                     misses += 1;
                     if misses > MAX_MISSES {
@@ -87,6 +99,12 @@ impl Walks {
             }
         }
         gap
+    }
+
+    /// Whether the last walk first failed on both sides where nothing is shown: the part outlined
+    /// against the background there.
+    pub fn outlined(&self) -> bool {
+        self.at_silhouette[0] && self.at_silhouette[1]
     }
 
     /// The width of the last walk from a pixel at depth `z0`: the run around it in its depth
