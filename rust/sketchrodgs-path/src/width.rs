@@ -85,7 +85,7 @@ impl Walks {
                 let z = image.depth(q);
                 if image.covered(q) && z >= low - far && z <= high + far && !off_colour(q) {
                     walk.push(z);
-                    (low, high, misses) = (low.min(z), high.max(z), 0);
+                    (low, high, misses, *silhouette) = (low.min(z), high.max(z), 0, false);
                 } else {
                     if misses == 0 {
                         *silhouette = !image.covered(q);
