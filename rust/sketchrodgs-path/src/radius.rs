@@ -89,9 +89,9 @@ pub fn estimate_radius(
         .collect();
     // the part's colour, where the Gaussians' colours are known: the median at the anchors
     let colour = part_colour(image, &anchors);
-    let (mut widths, outlined) = half_widths(image, &clean, &anchors, focal, max_px, None);
+    let (mut widths, outlined_share) = half_widths(image, &clean, &anchors, focal, max_px, None);
     let mut radius = if widths.is_empty() { rough } else { median(&mut widths) };
-    if let Some(colour) = colour.filter(|_| outlined < OUTLINED_SHARE) {
+    if let Some(colour) = colour.filter(|_| outlined_share < OUTLINED_SHARE) {
         let (mut in_colour, _) = half_widths(image, &clean, &anchors, focal, max_px, Some(colour));
         let by_colour = if in_colour.is_empty() { radius } else { median(&mut in_colour) };
         if radius > COLOUR_RATIO * by_colour {
