@@ -48,6 +48,13 @@ const OCCLUDER_LEAF: f32 = 3.5;
 /// end). A twig's fork measures less than half as wide.
 const OCCLUDER_BROAD: f32 = 2.0;
 const OCCLUDER_BROAD_SHARE: f32 = 0.5;
+/// An end run in front joined by a step of more than this many depth gaps, of two members or more,
+/// spanning at most `OCCLUDER_SHORT_R` radii on screen (and `OCCLUDER_BROAD_SHARE` of the arc), is
+/// cut however slender it is: a part does not step towards the camera and end a few radii later.
+/// It is the stroke running on over a nearer part where the stroked one passes behind it (a
+/// thicker finger of the tree in front of the one stroked; docs/extraction.md, "Stroke clean-up").
+const OCCLUDER_SHORT_STEP: f32 = 1.25;
+const OCCLUDER_SHORT_R: f32 = 4.0;
 /// An end run that turns sharply in depth off the rest of the chain is a surface the stroke ran on
 /// past the part's end (a leaf seen edge-on, the soil, a side stem behind): a part turns that
 /// sharply only where it meets another. The turn is at the chain's farthest member (for a run
@@ -254,17 +261,18 @@ pub(crate) fn clean_stroke(
 /// in front, up to `OCCLUDER_BROAD_SHARE` of the arc, is cut where its median is `OCCLUDER_BROAD`
 /// radii wider (a leaf the stem passes behind at its end, sloping towards the camera). A run behind
 /// the rest, or as slender as the part, is kept: that is the part going on (a stem receding from
-/// its junction, a twig into its fork), unless it turns off the part sharply in depth (`TURN_DEG`;
-/// `focal_px` 0 leaves that rule out).
+/// its junction, a twig into its fork), unless it turns off the part sharply in depth (`TURN_DEG`),
+/// or it is a short run stepped well in front (`OCCLUDER_SHORT_STEP`; `focal_px` 0 leaves these
+/// two rules out).
 fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, focal_px: f32) {
     let Some((first, last)) = chain.first().zip(chain.last()) else {
         return;
     };
     let chain_arc = arc[last.0] - arc[first.0];
-    cut_occluder_tail(chain, arc, depth_gap, chain_arc);
+    cut_occluder_tail(chain, arc, depth_gap, chain_arc, focal_px);
     cut_turn_tail(chain, arc, depth_gap, chain_arc, focal_px);
     chain.reverse();
-    cut_occluder_tail(chain, arc, depth_gap, chain_arc);
+    cut_occluder_tail(chain, arc, depth_gap, chain_arc, focal_px);
     cut_turn_tail(chain, arc, depth_gap, chain_arc, focal_px);
     chain.reverse();
 }
@@ -364,7 +372,7 @@ fn cut_turn_tail_signed(
 }
 
 /// `cut_occluder_ends` for the last members of `chain`, in whichever direction it runs.
-fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, chain_arc: f32) {
+fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, chain_arc: f32, focal_px: f32) {
     let n = chain.len();
     let step = (1..n).rev().find(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap);
     // where the last run of wide surfaces begins (within three members of the end), stepping over up
@@ -389,7 +397,15 @@ fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
         let mut wides: Vec<f32> = run.iter().map(|m| m.1.wide).collect();
         let median_wide = median(&mut wides);
         let broad = span <= chain_arc * OCCLUDER_BROAD_SHARE && median_wide >= OCCLUDER_BROAD;
-        if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad) {
+        // R in pixels at the run's depth (the gap is 3 R)
+        let radius_px = depth_gap / 3.0 * focal_px / nearest;
+        let short = stepped
+            && focal_px > 0.0
+            && run.len() >= 2
+            && nearest < chain[k - 1].1.depth - OCCLUDER_SHORT_STEP * depth_gap
+            && span <= OCCLUDER_SHORT_R * radius_px
+            && span <= chain_arc * OCCLUDER_BROAD_SHARE;
+        if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad || short) {
             chain.truncate(k);
             return;
         }
@@ -719,6 +735,32 @@ mod tests {
             assert_eq!(cut(at_end, 10, 0.9, 1.5, false), 0, "over 15 % of the chain, not broad");
             assert_eq!(cut(at_end, 10, 0.85, 3.0, true), 10, "a broad leaf over a third of the chain");
             assert_eq!(cut(at_end, 16, 0.85, 3.0, true), 0, "a broad surface over half the chain");
+        }
+    }
+
+    #[test]
+    fn a_short_slender_run_stepped_well_in_front_is_cut_and_a_longer_or_nearer_one_is_not() {
+        // 60 slender members 3 px apart on the part at depth 1; focal 1000 px and the gap 0.03, so
+        // R = 0.01 is about 10.5 px at the run's depth 0.95 (4 R = 42 px). The last or first
+        // `count` members step to `depth` at once.
+        let arc: Vec<f32> = (0..60).map(|i| 3.0 * i as f32).collect();
+        let cut = |at_end: bool, count: usize, depth: f32, focal_px: f32| {
+            let mut chain: Vec<_> =
+                (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect();
+            for j in 0..count {
+                chain[if at_end { 59 - j } else { j }].1.depth = depth;
+            }
+            cut_occluder_ends(&mut chain, &arc, 0.03, focal_px);
+            60 - chain.len()
+        };
+        for at_end in [true, false] {
+            assert_eq!(cut(at_end, 3, 0.95, 1000.0), 3, "a few radii on a nearer part: cut");
+            assert_eq!(cut(at_end, 12, 0.95, 1000.0), 12, "33 px, under 4 R: cut");
+            assert_eq!(cut(at_end, 18, 0.95, 1000.0), 0, "51 px, over 4 R: the part going on");
+            assert_eq!(cut(at_end, 1, 0.95, 1000.0), 0, "one member");
+            assert_eq!(cut(at_end, 3, 0.965, 1000.0), 0, "within 1.25 depth gaps");
+            assert_eq!(cut(at_end, 3, 1.05, 1000.0), 0, "behind: the part going on");
+            assert_eq!(cut(at_end, 3, 0.95, 0.0), 0, "no focal length: radii on screen unknown");
         }
     }
 
