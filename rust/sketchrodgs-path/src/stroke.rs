@@ -48,11 +48,12 @@ const OCCLUDER_LEAF: f32 = 3.5;
 /// end). A twig's fork measures less than half as wide.
 const OCCLUDER_BROAD: f32 = 2.0;
 const OCCLUDER_BROAD_SHARE: f32 = 0.5;
-/// An end run in front joined by a step of more than this many depth gaps, of two members or more,
-/// spanning at most `OCCLUDER_SHORT_R` radii on screen (and `OCCLUDER_BROAD_SHARE` of the arc), is
-/// cut however slender it is: a part does not step towards the camera and end a few radii later.
-/// It is the stroke running on over a nearer part where the stroked one passes behind it (a
-/// thicker finger of the tree in front of the one stroked; docs/extraction.md, "Stroke clean-up").
+/// An end run from a step over the depth gap within `OCCLUDER_SHORT_R` radii on screen of the end
+/// (and `OCCLUDER_BROAD_SHARE` of the arc), of two members or more, reaching more than this many
+/// gaps in front of the member before the step, is cut however slender it is
+/// (`cut_short_front_tail`): a part does not step towards the camera and end a few radii later. It
+/// is the stroke running on over a nearer part where the stroked one passes behind it (a thicker
+/// finger of the tree in front of the one stroked; docs/extraction.md, "Stroke clean-up").
 const OCCLUDER_SHORT_STEP: f32 = 1.25;
 const OCCLUDER_SHORT_R: f32 = 4.0;
 /// An end run that turns sharply in depth off the rest of the chain is a surface the stroke ran on
@@ -269,10 +270,12 @@ fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
         return;
     };
     let chain_arc = arc[last.0] - arc[first.0];
-    cut_occluder_tail(chain, arc, depth_gap, chain_arc, focal_px);
+    cut_occluder_tail(chain, arc, depth_gap, chain_arc);
+    cut_short_front_tail(chain, arc, depth_gap, chain_arc, focal_px);
     cut_turn_tail(chain, arc, depth_gap, chain_arc, focal_px);
     chain.reverse();
-    cut_occluder_tail(chain, arc, depth_gap, chain_arc, focal_px);
+    cut_occluder_tail(chain, arc, depth_gap, chain_arc);
+    cut_short_front_tail(chain, arc, depth_gap, chain_arc, focal_px);
     cut_turn_tail(chain, arc, depth_gap, chain_arc, focal_px);
     chain.reverse();
 }
@@ -372,7 +375,7 @@ fn cut_turn_tail_signed(
 }
 
 /// `cut_occluder_ends` for the last members of `chain`, in whichever direction it runs.
-fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, chain_arc: f32, focal_px: f32) {
+fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap: f32, chain_arc: f32) {
     let n = chain.len();
     let step = (1..n).rev().find(|&k| (chain[k].1.depth - chain[k - 1].1.depth).abs() > depth_gap);
     // where the last run of wide surfaces begins (within three members of the end), stepping over up
@@ -397,15 +400,37 @@ fn cut_occluder_tail(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
         let mut wides: Vec<f32> = run.iter().map(|m| m.1.wide).collect();
         let median_wide = median(&mut wides);
         let broad = span <= chain_arc * OCCLUDER_BROAD_SHARE && median_wide >= OCCLUDER_BROAD;
-        // R in pixels at the run's depth (the gap is 3 R)
-        let radius_px = depth_gap / 3.0 * focal_px / nearest;
-        let short = stepped
-            && focal_px > 0.0
-            && run.len() >= 2
-            && nearest < chain[k - 1].1.depth - OCCLUDER_SHORT_STEP * depth_gap
-            && span <= OCCLUDER_SHORT_R * radius_px
-            && span <= chain_arc * OCCLUDER_BROAD_SHARE;
-        if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad || short) {
+        if nearest < chain[k - 1].1.depth - depth_gap && (leaf || broad) {
+            chain.truncate(k);
+            return;
+        }
+    }
+}
+
+/// The short-run rule (`OCCLUDER_SHORT_STEP`) for the last members of `chain`: the run from a step
+/// within `OCCLUDER_SHORT_R` radii of the end, the last such step first (a run may step twice, onto
+/// a nearer part and then onto one nearer still).
+fn cut_short_front_tail(
+    chain: &mut Vec<(usize, Candidate)>,
+    arc: &[f32],
+    depth_gap: f32,
+    chain_arc: f32,
+    focal_px: f32,
+) {
+    let n = chain.len();
+    if n < 3 || focal_px <= 0.0 {
+        return;
+    }
+    let end = &chain[n - 1];
+    // R in pixels at the end's depth (the gap is 3 R)
+    let reach = (OCCLUDER_SHORT_R * depth_gap / 3.0 * focal_px / end.1.depth).min(chain_arc * OCCLUDER_BROAD_SHARE);
+    for k in (1..n - 1).rev() {
+        if (arc[end.0] - arc[chain[k].0]).abs() > reach {
+            return;
+        }
+        let before = chain[k - 1].1.depth;
+        let nearest = chain[k..].iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
+        if (chain[k].1.depth - before).abs() > depth_gap && nearest < before - OCCLUDER_SHORT_STEP * depth_gap {
             chain.truncate(k);
             return;
         }
@@ -762,6 +787,16 @@ mod tests {
             assert_eq!(cut(at_end, 3, 1.05, 1000.0), 0, "behind: the part going on");
             assert_eq!(cut(at_end, 3, 0.95, 0.0), 0, "no focal length: radii on screen unknown");
         }
+        // a run stepping twice: four members 1.5 gaps in front, then one more 1.3 gaps in front of
+        // them (a single member is not a run of its own; from the first step it is)
+        let mut chain: Vec<_> =
+            (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect();
+        for m in &mut chain[55..59] {
+            m.1.depth = 0.955;
+        }
+        chain[59].1.depth = 0.915;
+        cut_occluder_ends(&mut chain, &arc, 0.03, 1000.0);
+        assert_eq!(chain.len(), 55, "cut at the first step");
     }
 
     #[test]
