@@ -78,9 +78,13 @@ def test_an_end_hooking_off_the_axis_is_cut_and_a_bend_is_kept():
         8 * R * np.stack([np.cos(a := np.arange(0, np.pi / 2, 1 / 16)), np.sin(a), 0 * a], axis=1),
     ):
         np.testing.assert_array_equal(pl.cut_hooked_ends(kept, R), kept)
-    # a part shorter than 6.5 R is left alone, and points in one place are no division by zero
+    # a part shorter than 6.5 R (a sprinkle): its hook is judged against the rest of its axis
     short = straight_with_hook(4, 1.5, 90)
-    np.testing.assert_array_equal(pl.cut_hooked_ends(short, R), short)
+    cut = pl.cut_hooked_ends(short, R)
+    assert np.abs(cut[:, 1]).max() < 0.6 * R and pl.polyline_length(cut) > 3.5 * R
+    # one shorter than 3.5 R is left alone, and points in one place are no division by zero
+    tiny = straight_with_hook(1.5, 1.5, 90)
+    np.testing.assert_array_equal(pl.cut_hooked_ends(tiny, R), tiny)
     assert len(pl.cut_hooked_ends(np.zeros((30, 3)), R)) == 30
 
 

@@ -32,7 +32,6 @@ MISSES = {
         "heldout/guitar_stand_foot_back",
     },
     "jitter": {
-        "cases/donut_sprinkle_b",
         "cases/plant_side_stem_long",
         "cases/plant_side_stem_right",
         "heldout/plant_stem_back",

@@ -22,12 +22,16 @@ _TUKEY_RADII = 1.3
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
 _REACHES = (2.2, 1.5, 1.5)
-# cut_hooked_ends: an end's first radii, the axis beyond them, the turn that is a hook, and how
-# often an end is cut (at 60 degrees, or once an end, the main stem's ends stayed hooked)
+# cut_hooked_ends: an end's first radii, the axis beyond them (to this far from the end, or to the
+# other end on a short axis, at least _HOOK_AXIS_LEAST long), the turn that is a hook, how often an
+# end is cut (at 60 degrees, or once an end, the main stem's ends stayed hooked), and how much a
+# cut leaves at least
 _HOOK_REACH = 1.5
 _HOOK_INWARD = 5.0
+_HOOK_AXIS_LEAST = 2.0
 _HOOK_DEG = 45.0
 _HOOK_CUTS = 3
+_HOOK_KEEP = 2.0
 # ... then corners: within _CORNER_REACH radii of an end, the directions over the _CORNER_BEFORE
 # radii before a point and the _CORNER_AFTER radii after it turning by over _CORNER_DEG (the hook's
 # angle at the scale of radii); axes under _CORNER_LEAST radii are left alone, and a cut leaves
@@ -152,10 +156,11 @@ def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.nd
 def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
     """Cut the ends that hook off the axis (docs/extraction.md, "Polyline"). Where the chord over an
     end's first `_HOOK_REACH` radii turns by more than `_HOOK_DEG` from the axis over the radii
-    after it (to `_HOOK_INWARD`), those radii go, up to `_HOOK_CUTS` times an end. A slender part
-    seldom turns that sharply within a radius or two of its end: the hook is mostly the path
-    stepping onto what the part touches there (a bud, a leaf's base, the body a leg stands on).
-    Axes shorter than `_HOOK_INWARD + _HOOK_REACH` radii are left alone. Then the corners
+    after it (to `_HOOK_INWARD`, or to the other end of an axis shorter than that), those radii go,
+    up to `_HOOK_CUTS` times an end. A slender part seldom turns that sharply within a radius or
+    two of its end: the hook is mostly the path stepping onto what the part touches there (a bud,
+    a leaf's base, the body a leg stands on). Axes shorter than `_HOOK_REACH + _HOOK_AXIS_LEAST`
+    radii are left alone, and no cut leaves less than `_HOOK_KEEP` radii. Then the corners
     (`_uncornered`); where a round cut anything, the new ends are judged again.
 
     Args:
@@ -270,18 +275,22 @@ def _unhooked(points: np.ndarray, radius: float) -> np.ndarray:
 def _hook_cut(points: np.ndarray, radius: float) -> np.ndarray:
     """`points` less the first `_HOOK_REACH` radii of each end that hooks (one cut an end)."""
     keep = [0, len(points)]
-    if polyline_length(points) < (_HOOK_INWARD + _HOOK_REACH) * radius:
+    length = polyline_length(points)
+    if length < (_HOOK_REACH + _HOOK_AXIS_LEAST) * radius:
         return points
     for end in (0, 1):
         q = points if end == 0 else points[::-1]
         arc = arc_lengths(q)
         cut = int(np.searchsorted(arc, _HOOK_REACH * radius))
-        inner = int(np.searchsorted(arc, _HOOK_INWARD * radius))
+        # a sprinkle's axis is shorter than _HOOK_INWARD: the rest of it is the axis (its hooks
+        # were left alone, and a jittered stroke's rod hooked 1.9 R off at an end)
+        inner = min(int(np.searchsorted(arc, min(_HOOK_INWARD * radius, length))), len(q) - 1)
         chord, axis = q[cut] - q[0], q[inner] - q[cut]
         norms = float(np.linalg.norm(chord) * np.linalg.norm(axis))
         if norms > 0 and chord @ axis < np.cos(np.radians(_HOOK_DEG)) * norms:
             keep[end] = cut if end == 0 else len(points) - cut
-    return points[keep[0] : keep[1]]
+    kept = points[keep[0] : keep[1]]
+    return kept if len(kept) > 1 and polyline_length(kept) >= _HOOK_KEEP * radius else points
 
 
 def _third_difference_gram(n: int) -> np.ndarray:
