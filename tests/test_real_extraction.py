@@ -42,9 +42,9 @@ MISSES = {
     },
     "radius": {
         "cases/donut_sprinkle_b",
-        "heldout/plant_petiole_right",
         "cases/guitar_stand_leg_left",
         "cases/guitar_stand_leg_right",
+        "heldout/plant_petiole_right",
         "heldout/guitar_stand_foot_back",
     },
     "end_gap": {"heldout/plant_petiole_right", "heldout/donut_sprinkle_c"},

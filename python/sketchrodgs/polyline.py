@@ -283,8 +283,8 @@ def _hook_cut(points: np.ndarray, radius: float) -> np.ndarray:
         arc = arc_lengths(q)
         cut = int(np.searchsorted(arc, _HOOK_REACH * radius))
         # a sprinkle's axis is shorter than _HOOK_INWARD: the rest of it is the axis (its hooks
-        # were left alone, and a jittered stroke's rod hooked 1.9 R off at an end)
-        inner = min(int(np.searchsorted(arc, min(_HOOK_INWARD * radius, length))), len(q) - 1)
+        # were left alone, and a jittered stroke's rod hooked 1.85 R off at an end)
+        inner = min(int(np.searchsorted(arc, _HOOK_INWARD * radius)), len(q) - 1)
         chord, axis = q[cut] - q[0], q[inner] - q[cut]
         norms = float(np.linalg.norm(chord) * np.linalg.norm(axis))
         if norms > 0 and chord @ axis < np.cos(np.radians(_HOOK_DEG)) * norms:

@@ -424,12 +424,14 @@ fn cut_short_front_tail(
     let end = &chain[n - 1];
     // R in pixels at the end's depth (the gap is 3 R)
     let reach = (OCCLUDER_SHORT_R * depth_gap / 3.0 * focal_px / end.1.depth).min(chain_arc * OCCLUDER_BROAD_SHARE);
+    // the nearest depth of the run from member k to the end, kept as k moves inwards
+    let mut nearest = end.1.depth;
     for k in (1..n - 1).rev() {
         if (arc[end.0] - arc[chain[k].0]).abs() > reach {
             return;
         }
+        nearest = nearest.min(chain[k].1.depth);
         let before = chain[k - 1].1.depth;
-        let nearest = chain[k..].iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
         if (chain[k].1.depth - before).abs() > depth_gap && nearest < before - OCCLUDER_SHORT_STEP * depth_gap {
             chain.truncate(k);
             return;
@@ -769,9 +771,11 @@ mod tests {
         // R = 0.01 is about 10.5 px at the run's depth 0.95 (4 R = 42 px). The last or first
         // `count` members step to `depth` at once.
         let arc: Vec<f32> = (0..60).map(|i| 3.0 * i as f32).collect();
+        let part = || -> Vec<_> {
+            (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect()
+        };
         let cut = |at_end: bool, count: usize, depth: f32, focal_px: f32| {
-            let mut chain: Vec<_> =
-                (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect();
+            let mut chain = part();
             for j in 0..count {
                 chain[if at_end { 59 - j } else { j }].1.depth = depth;
             }
@@ -789,8 +793,7 @@ mod tests {
         }
         // a run stepping twice: four members 1.5 gaps in front, then one more 1.3 gaps in front of
         // them (a single member is not a run of its own; from the first step it is)
-        let mut chain: Vec<_> =
-            (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect();
+        let mut chain = part();
         for m in &mut chain[55..59] {
             m.1.depth = 0.955;
         }
