@@ -8,7 +8,8 @@ fractions in the captions.
 
 Each pull is written to OUT_DIR/pull_<case>.png. OUT_DIR/pull_free_tip.png is the bundled plant's
 stem held at its base only, its tip free: before and after what continues the stem past the
-stroke rides with the tip (docs/deformation.md, "Continuations").
+stroke rides with the tip (docs/deformation.md, "Continuations"). OUT_DIR/pull_rope_on_floor.png
+is a rope lifted off a floor of another colour: before and after the floor was left out of it.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from sketchrodgs import data, extract_rod, load_scene, render, segment
+from sketchrodgs import Camera, data, extract_rod, load_scene, render, segment, synthetic
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.images import save_png, to_uint8
 from sketchrodgs.realcases import load_cases
@@ -67,12 +68,62 @@ def free_tip(out: Path) -> None:
             pass  # held out
         return render(animation.current_scene(), camera).rgb
 
+    side_by_side(
+        out / "pull_free_tip.png",
+        box,
+        [
+            (render(scene, camera).rgb, "the bundled stem at rest"),
+            (pulled(False), "held at its base, before: its tip stays"),
+            (pulled(True), "now: the tip and its leaves follow"),
+        ],
+    )
+    print(f"{out / 'pull_free_tip.png'}: the free tip")
+
+
+def rope_on_floor(out: Path) -> None:
+    """`synthetic.rope_on_floor_scene` seen from 60 degrees, the rope's middle lifted 8 R and held:
+    before and after the floor under it was left out of the part (docs/deformation.md,
+    "Segmentation")."""
+    tubes = synthetic.rope_on_floor_scene(radius=0.01, seed=1)
+    tilt = np.radians(60)
+    camera = Camera.look_at(
+        (0.0, -0.6 * np.sin(tilt), -0.6 * np.cos(tilt)), (0, 0, 0), up=(0, -1, 0), width=960, height=540, fov_y_deg=50
+    )
+    uv, _ = camera.project(tubes.axes[0][::100])
+    stroke = uv + np.random.default_rng(0).normal(0, 2.0, uv.shape)
+
+    def lifted(colours: bool) -> tuple[np.ndarray, int]:
+        keep = segment._part_and_attached
+        if not colours:  # segmentation as it was: the centres only
+            segment._part_and_attached = lambda *args, colours=None, **kwargs: keep(*args, **kwargs)
+        try:
+            extraction = extract_rod(tubes.scene, camera, stroke, radius=tubes.radius)
+        finally:
+            segment._part_and_attached = keep
+        floor = int((tubes.labels[extraction.gaussian_ids] < 0).sum())
+        animation = Animation(tubes.scene, [extraction])
+        lift = Pull(len(extraction.polyline) // 2, (0.0, -0.08, 0.0), duration=0.3, hold=0.2, release=False, settle=0.0)
+        for _ in animation.frames(lift, fps=30):
+            pass  # held up
+        return render(animation.current_scene(), camera).rgb, floor
+
+    (before, floor_before), (now, floor_now) = lifted(False), lifted(True)
+    side_by_side(
+        out / "pull_rope_on_floor.png",
+        (180, 200, 780, 430),
+        [
+            (render(tubes.scene, camera).rgb, "a rope on a floor, at rest"),
+            (before, f"lifted, before: {floor_before:,} floor Gaussians bound"),
+            (now, f"now: {floor_now:,} floor Gaussians bound"),
+        ],
+    )
+    print(f"{out / 'pull_rope_on_floor.png'}: floor Gaussians bound {floor_before} before, {floor_now} now")
+
+
+def side_by_side(path: Path, box: tuple[int, int, int, int], images: list[tuple[np.ndarray, str]]) -> None:
+    """The crops `box` of `images` (RGB, with a caption each) side by side, written to `path`."""
     panels = []
-    for rgb, caption in (
-        (render(scene, camera).rgb, "the bundled stem at rest"),
-        (pulled(False), "held at its base, before: its tip stays"),
-        (pulled(True), "now: the tip and its leaves follow"),
-    ):
+    for rgb, caption in images:
         image = Image.fromarray(to_uint8(rgb)).crop(box)
         image = image.resize((WIDTH, round(image.height * WIDTH / image.width)), Image.LANCZOS)
         framed = Image.new("RGB", (image.width, image.height + 22), "white")
@@ -82,8 +133,7 @@ def free_tip(out: Path) -> None:
     sheet = Image.new("RGB", (sum(p.width for p in panels) + 8 * (len(panels) - 1), panels[0].height), "white")
     for k, p in enumerate(panels):
         sheet.paste(p, (k * (p.width + 8), 0))
-    save_png(out / "pull_free_tip.png", np.asarray(sheet))
-    print(f"{out / 'pull_free_tip.png'}: the free tip")
+    save_png(path, np.asarray(sheet))
 
 
 def main() -> None:
@@ -119,6 +169,7 @@ def main() -> None:
             f"tears {new.tears:.2%}"
         )
     free_tip(args.out)
+    rope_on_floor(args.out)
 
 
 if __name__ == "__main__":

@@ -243,13 +243,20 @@ def test_a_rope_lying_on_a_floor_estimates_its_radius(rope_on_floor, tilt_deg):
     assert 0.7 <= ex.radius / expected <= 1.4, (ex.radius / expected, ex.radius / rope_on_floor.radius)
 
 
-@pytest.mark.xfail(strict=True, reason="the floor within 2.5 R of the axis is bound (issue 14, item 4)")
-def test_a_rope_lying_on_a_floor_binds_the_rope_not_the_floor(rope_on_floor):
-    camera = floor_camera(60)
+@pytest.mark.parametrize("tilt_deg", [30, 60, 80])
+def test_a_rope_lying_on_a_floor_binds_the_rope_not_the_floor(rope_on_floor, tilt_deg):
+    """The floor runs through the part's reach (2.5 R) beside the rope, and 2,500-2,900 of its
+    Gaussians were bound (of 5,900-6,800): pulled, the rope tore the floor up with it. The floor is
+    another colour and a sheet, so it is left out (docs/deformation.md, "Segmentation")."""
+    camera = floor_camera(tilt_deg)
     stroke = floor_stroke(rope_on_floor.axes[0], camera)
     ex = extract_rod(rope_on_floor.scene, camera, stroke, radius=rope_on_floor.radius)
     floor = rope_on_floor.labels[ex.gaussian_ids] < 0
     assert floor.mean() <= 0.05, f"{floor.sum()} of {len(floor)} bound Gaussians are the floor's"
+    # all of the rope follows, its tip past the stroke's end too (it continues the part, and the
+    # floor it lies on no longer joins it to the whole floor)
+    rope = np.flatnonzero(rope_on_floor.labels >= 0)
+    assert np.isin(rope, ex.gaussian_ids).mean() >= 0.99
 
 
 @pytest.mark.parametrize("centre_deg", range(0, 360, 45))

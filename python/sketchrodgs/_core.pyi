@@ -335,6 +335,7 @@ def segment_and_bind(
     link_max: float,
     attach_size: float | None,
     end_margin: float,
+    colours: npt.NDArray[np.float32] | None = None,
 ) -> tuple[
     npt.NDArray[np.int64],
     npt.NDArray[np.int32],
@@ -342,6 +343,7 @@ def segment_and_bind(
     npt.NDArray[np.float32],
     npt.NDArray[np.float32],
     npt.NDArray[np.bool_],
+    tuple[list[float], list[float]] | None,
 ]: ...
 def skin_scatter(
     rest: npt.NDArray[np.float32],

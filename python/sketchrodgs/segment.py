@@ -5,7 +5,9 @@ Three sets, found over a proximity graph of Gaussian centres (centres closer tha
 distance are neighbours, so a gap in the cloud separates parts):
 - the part: grown from the Gaussians within R of the axis over neighbours within `grow * R` of
   the axis and within the rod's extent along it, so that a cross-section that is not round (the
-  fretboard edge of a guitar neck) goes whole, and a neighbour across a gap stays;
+  fretboard edge of a guitar neck) goes whole, and a neighbour across a gap stays; a surface of
+  another colour that the part lies on (a floor, a table) is left out where its centres form a
+  sheet beside the axis;
 - attached parts: what hangs on the part and is small (every piece of it within `attach_size` of
   where it joins; a leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the
   rod point where it joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach
@@ -136,10 +138,15 @@ def segment_and_bind(
     # Every step below reads the centres within its own reach of the rod: cut the scene to all of
     # their reaches once (each step's own cut is then a pass over thousands, not millions).
     rows = near_box(polyline, scene.means, _reach(radius, grow, attach_size, continuation_size))
-    means = _f32(scene.means[rows])
-    binding = _part_and_attached(polyline, means, radius, grow=grow, attach_size=attach_size if attach else None)
+    means, colours = _f32(scene.means[rows]), scene.colors_of(rows)
+    binding, surface = _part_and_attached(
+        polyline, means, radius, grow=grow, attach_size=attach_size if attach else None, colours=colours
+    )
     if attach:
-        binding = _with_continuations(binding, polyline, means, radius, continuation_size)
+        # a surface left out of the part does not continue it past an end either (a rope's tip
+        # past the stroke lies on the floor, joined to all of it)
+        free = None if surface is None else ~_nearer_second(colours, *surface)
+        binding = _with_continuations(binding, polyline, means, radius, continuation_size, free)
         binding = _with_strays(binding, polyline, means, radius, attach_size)
     return replace(binding, gaussian_ids=rows[binding.gaussian_ids])
 
@@ -158,17 +165,25 @@ def part_and_attached(
 ) -> Binding:
     """The part and its attached parts (None: none), in one Rust call, without the strays: the
     step that `tests/reference/segment_reference.py` matches to the bit."""
-    return _part_and_attached(polyline, _f32(scene.means), radius, grow=grow, attach_size=attach_size)
+    return _part_and_attached(polyline, _f32(scene.means), radius, grow=grow, attach_size=attach_size)[0]
 
 
 def _part_and_attached(
-    polyline: np.ndarray, means: np.ndarray, radius: float, *, grow: float, attach_size: float | None
-) -> Binding:
-    """`part_and_attached` over the centres `means` (N, 3) float32 (ids index them)."""
+    polyline: np.ndarray,
+    means: np.ndarray,
+    radius: float,
+    *,
+    grow: float,
+    attach_size: float | None,
+    colours: np.ndarray | None = None,
+) -> tuple[Binding, tuple[np.ndarray, np.ndarray] | None]:
+    """`part_and_attached` over the centres `means` (N, 3) float32 (ids index them); with their
+    `colours` (N, 3) float32, a surface of another colour under the part is left out of it, and
+    (the part's colour, the surface's) is returned with the binding (else None)."""
     polyline = np.ascontiguousarray(polyline, np.float64)
     # The arc lengths and the length as NumPy sums them: the decisions near the rod's ends compare
     # with them to the bit.
-    ids, segment, t, offset, distance, attached = _core.segment_and_bind(
+    ids, segment, t, offset, distance, attached, surface = _core.segment_and_bind(
         polyline,
         arc_lengths(polyline),
         polyline_length(polyline),
@@ -180,8 +195,16 @@ def _part_and_attached(
         LINK_MAX,
         None if attach_size is None else float(attach_size),
         END_MARGIN,
+        colours,
     )
-    return Binding(ids, segment, t, offset, distance, attached)
+    colours_told = None if surface is None else (np.asarray(surface[0], np.float32), np.asarray(surface[1], np.float32))
+    return Binding(ids, segment, t, offset, distance, attached), colours_told
+
+
+def _nearer_second(colours: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Per row of `colours` (N, 3): nearer `second` than `first` (the rule of the Rust
+    `Surface::has`)."""
+    return np.linalg.norm(colours - second, axis=1) < np.linalg.norm(colours - first, axis=1)
 
 
 def _with_strays(
@@ -268,10 +291,11 @@ def _link(tree: cKDTree, radius: float) -> float:
 
 
 def _with_continuations(
-    binding: Binding, polyline: np.ndarray, means: np.ndarray, radius: float, size: float
+    binding: Binding, polyline: np.ndarray, means: np.ndarray, radius: float, size: float, free: np.ndarray | None
 ) -> Binding:
     """`binding` and what continues the part past each end (see the module docstring), each bound
-    as an attached Gaussian at that end, with its own offset."""
+    as an attached Gaussian at that end, with its own offset; only rows `free` (all where None)
+    may continue it."""
     arc = arc_lengths(polyline)
     along = arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
     # the part's Gaussians within END_MARGIN R of each end: what a continuation touches
@@ -290,6 +314,8 @@ def _with_continuations(
     vertices = polyline[[0, -1]]
     around = _core.rows_in_box(means, tuple(vertices.min(axis=0) - region), tuple(vertices.max(axis=0) + region))
     around = around[~np.isin(around, binding.gaussian_ids)]
+    if free is not None:
+        around = around[free[around]]
     found: list[Binding] = []
 
     for end, at_end in enumerate(ends):

@@ -3,7 +3,8 @@
 //!
 //! Three sets, found over the links between centres (`proximity`):
 //! - the part: grown from the centres within R of the axis over linked centres within
-//!   `grow * R` of it and within the rod's extent along it;
+//!   `grow * R` of it and within the rod's extent along it, less a surface of another colour the
+//!   part lies on (`surface_left_out`, where colours are given);
 //! - attached parts: components of the links among the other centres that touch the part and are
 //!   small (every piece within `attach_size` of where it joins, none within a link of the searched
 //!   region's edge). Each rides with the part centre it joins at; within `end_margin * R` of a rod
@@ -53,6 +54,23 @@ pub struct Binding {
     pub distance: Vec<f32>,
     /// Rides rigidly with the point where its attached part joins.
     pub attached: Vec<bool>,
+    /// The colours that told a surface under the part from it, where one was left out
+    /// (`surface_left_out`).
+    pub surface: Option<Surface>,
+}
+
+/// A surface left out of the part: its colour and the part's (RGB).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Surface {
+    pub part_colour: [f32; 3],
+    pub colour: [f32; 3],
+}
+
+impl Surface {
+    /// Whether `colour` is nearer the surface's colour than the part's.
+    pub fn has(&self, colour: &[f32; 3]) -> bool {
+        colour_distance(colour, &self.colour) < colour_distance(colour, &self.part_colour)
+    }
 }
 
 /// What makes segmentation impossible.
@@ -66,16 +84,140 @@ pub enum SegmentError {
     BadParameter { name: &'static str, bound: &'static str, value: f64 },
     #[error("{arcs} arc lengths for {vertices} polyline vertices")]
     ArcCount { vertices: usize, arcs: usize },
+    #[error("{colours} colours for {means} centres")]
+    ColourCount { means: usize, colours: usize },
+}
+
+/// A surface counts as another colour than the part's where the two colours lie further apart
+/// than this many times the part's own spread (the median distance of its seeds' colours from
+/// their median), and at least `SURFACE_LEAST_GAP` (RGB in 0..1, Euclidean): the thresholds of the
+/// radius told by colour (docs/extraction.md, "A part lying on a surface").
+const SURFACE_SPREADS: f32 = 4.0;
+const SURFACE_LEAST_GAP: f32 = 0.2;
+/// Fewer seeds or surface centres than this tell no colour.
+const SURFACE_LEAST_CENTRES: usize = 8;
+/// A surface is a sheet: its centres near the part scatter along their mean direction from the axis
+/// (its thickness) by at most this share of their scatter across it, beside the axis (its width;
+/// standard deviations). The floor under a rope: 0.04-0.05; a clean half tube, 0.5; a tree
+/// branch's side in shade, which is another colour too: 0.70-0.99.
+const SHEET_FLATNESS: f64 = 0.25;
+
+/// A part lying on a surface of another colour (a cable on a table, a rope on a floor;
+/// docs/deformation.md, "Segmentation", **A surface under the part**): the surface runs through
+/// the part's reach beside the axis, and every centre of it there would be grown into the part.
+///
+/// The surface's colour is the median of the centres just past the reach beside the rod (`kind`
+/// `OTHER`, not past an end), the part's the median of the seeds nearer their own median than the
+/// surface's (the surface passes within R of the axis). Where the two colours differ
+/// (`SURFACE_SPREADS`) and the centres nearer the surface's colour form a sheet beside the axis
+/// (`SHEET_FLATNESS`), those centres are left out (`OTHER`). Elsewhere nothing changes: a stem
+/// among leaves of its own green, a branch whose baked shading darkens one side.
+fn surface_left_out(kind: &mut [u8], near: &Centres, colours: &[[f32; 3]], rod: &Rod) -> Option<Surface> {
+    let vertices = rod.polyline.len();
+    let pick = |wanted: &dyn Fn(usize) -> bool| -> Vec<[f32; 3]> {
+        (0..kind.len()).filter(|&i| wanted(i)).map(|i| colours[i]).collect()
+    };
+    let seeds = pick(&|i| kind[i] == proximity::SEED);
+    let surface = pick(&|i| kind[i] == proximity::OTHER && which_end(&near.nearest[i], vertices).is_none());
+    if seeds.len() < SURFACE_LEAST_CENTRES || surface.len() < SURFACE_LEAST_CENTRES {
+        return None;
+    }
+    let surface_colour = median_colour(&surface);
+    let first = median_colour(&seeds);
+    let own: Vec<[f32; 3]> =
+        seeds.into_iter().filter(|c| colour_distance(c, &first) <= colour_distance(c, &surface_colour)).collect();
+    if own.len() < SURFACE_LEAST_CENTRES {
+        return None;
+    }
+    let part_colour = median_colour(&own);
+    let spread = median(&mut own.iter().map(|c| colour_distance(c, &part_colour)).collect::<Vec<_>>());
+    if colour_distance(&part_colour, &surface_colour) <= (SURFACE_SPREADS * spread).max(SURFACE_LEAST_GAP) {
+        return None;
+    }
+    let surface = Surface { part_colour, colour: surface_colour };
+    let left_out: Vec<usize> =
+        (0..kind.len()).filter(|&i| kind[i] != proximity::OTHER && surface.has(&colours[i])).collect();
+    if left_out.len() < SURFACE_LEAST_CENTRES || !is_sheet(&left_out, near, rod) {
+        return None;
+    }
+    for i in left_out {
+        kind[i] = proximity::OTHER;
+    }
+    Some(surface)
+}
+
+/// Whether the centres `which` of `near` lie in a sheet beside the axis (`SHEET_FLATNESS`): their
+/// offsets from their nearest points on the polyline, along the mean of those offsets' directions
+/// and across it (perpendicular to that and to the polyline there).
+fn is_sheet(which: &[usize], near: &Centres, rod: &Rod) -> bool {
+    let dot = |a: &[f64; 3], b: &[f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let unit = |v: [f64; 3]| {
+        let length = dot(&v, &v).sqrt();
+        (length > 0.0).then(|| v.map(|c| c / length))
+    };
+    let (offsets, tangents): (Vec<[f64; 3]>, Vec<[f64; 3]>) = which
+        .iter()
+        .map(|&i| {
+            let (n, p) = (&near.nearest[i], near.points[i]);
+            let (a, b) = (rod.polyline[n.segment as usize], rod.polyline[n.segment as usize + 1]);
+            let t = f64::from(n.t);
+            let offset = std::array::from_fn(|k| f64::from(p[k]) - (a[k] + t * (b[k] - a[k])));
+            (offset, unit(std::array::from_fn(|k| b[k] - a[k])).unwrap_or_default())
+        })
+        .unzip();
+    let mut direction = [0.0; 3];
+    for o in offsets.iter().filter_map(|&o| unit(o)) {
+        (0..3).for_each(|k| direction[k] += o[k]);
+    }
+    let Some(direction) = unit(direction) else { return false };
+    let deviation = |values: Vec<f64>| {
+        let mean = values.iter().sum::<f64>() / values.len() as f64;
+        (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64).sqrt()
+    };
+    let thickness = deviation(offsets.iter().map(|o| dot(o, &direction)).collect());
+    let width = deviation(
+        offsets
+            .iter()
+            .zip(&tangents)
+            .map(|(o, t)| {
+                let across = [
+                    t[1] * direction[2] - t[2] * direction[1],
+                    t[2] * direction[0] - t[0] * direction[2],
+                    t[0] * direction[1] - t[1] * direction[0],
+                ];
+                dot(o, &across)
+            })
+            .collect(),
+    );
+    thickness <= SHEET_FLATNESS * width
+}
+
+/// The per-channel median.
+fn median_colour(colours: &[[f32; 3]]) -> [f32; 3] {
+    std::array::from_fn(|c| median(&mut colours.iter().map(|v| v[c]).collect::<Vec<_>>()))
+}
+
+/// The middle value (the upper one of an even count); `values` is reordered and not empty.
+fn median(values: &mut [f32]) -> f32 {
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f32::total_cmp).1
+}
+
+fn colour_distance(a: &[f32; 3], b: &[f32; 3]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// The Gaussians (centres `means`) that follow the rod on `polyline`, bound (see the module
 /// docs). `arc` is the arc length at each vertex and `length` the rod's length, as the caller
 /// measures them (a sum in another order may differ from the last arc length in the last bits).
+/// `colours` (RGB per row of `means`, when known) keep a surface the part lies on out of it
+/// (`surface_left_out`).
 pub fn segment_and_bind(
     polyline: &[[f64; 3]],
     arc: &[f64],
     length: f64,
     means: &[[f32; 3]],
+    colours: Option<&[[f32; 3]]>,
     params: &SegmentParams,
 ) -> Result<Binding, SegmentError> {
     let vertices = polyline.len();
@@ -95,6 +237,11 @@ pub fn segment_and_bind(
     if let Some(size) = params.attach_size {
         checked("attach_size", size, Bound::NotNegative)?;
     }
+    if let Some(colours) = colours
+        && colours.len() != means.len()
+    {
+        return Err(SegmentError::ColourCount { means: means.len(), colours: colours.len() });
+    }
     let rod = Rod { polyline, polyline32: polyline.iter().map(|v| v.map(|c| c as f32)).collect(), means };
 
     // The part: exact nearest points of everything within its reach (and a link more, where what
@@ -103,7 +250,7 @@ pub fn segment_and_bind(
     // The rod's extent: a centre past an end vertex is the part's within R of it (the end cap);
     // what continues past that is not.
     let (part_reach32, radius32) = (part_reach as f32, radius as f32);
-    let kind: Vec<u8> = near
+    let mut kind: Vec<u8> = near
         .nearest
         .iter()
         .map(|n| {
@@ -116,6 +263,10 @@ pub fn segment_and_bind(
             }
         })
         .collect();
+    let surface = colours.and_then(|colours| {
+        let colour_of: Vec<[f32; 3]> = near.rows.iter().map(|&r| colours[r as usize]).collect();
+        surface_left_out(&mut kind, &near, &colour_of, &rod)
+    });
     let link_bounds = ((params.link_min * radius) as f32, (params.link_max * radius) as f32);
     let part = proximity::Part::grow(&near.points, &kind, params.link_spacings, link_bounds.0, link_bounds.1)?;
     let in_part = part.members();
@@ -143,7 +294,7 @@ pub fn segment_and_bind(
             (home[row], attached[row]) = (Some(contact), true);
         }
     }
-    Ok(bind(&rod, &near, &around, &home, &attached))
+    Ok(Binding { surface, ..bind(&rod, &near, &around, &home, &attached) })
 }
 
 enum Bound {
@@ -369,6 +520,7 @@ fn bind(rod: &Rod, near: &Centres, around: &Centres, home: &[Option<u32>], attac
         offset: bound.par_iter().map(offset).collect(),
         distance: bound.iter().map(|b| b.2).collect(),
         attached: bound.iter().map(|b| b.3).collect(),
+        surface: None,
     }
 }
 
@@ -417,7 +569,7 @@ mod tests {
     #[test]
     fn the_tube_follows_and_the_blob_on_its_stalk_rides_where_the_stalk_joins() {
         let (polyline, arc, means) = scene();
-        let binding = segment_and_bind(&polyline, &arc, 1.0, &means, &params()).unwrap();
+        let binding = segment_and_bind(&polyline, &arc, 1.0, &means, None, &params()).unwrap();
         let tube = 201 * 12;
         assert!(binding.rows.windows(2).all(|w| w[0] < w[1]));
         let bound = |row: usize| binding.rows.binary_search(&(row as u32)).ok();
@@ -435,7 +587,8 @@ mod tests {
             assert!((f64::from(means[row as usize][0]) - rest - f64::from(binding.offset[k][0])).abs() < 1e-6);
         }
         // nothing attached when asked so, and the blob then stays
-        let none = segment_and_bind(&polyline, &arc, 1.0, &means, &SegmentParams { attach_size: None, ..params() });
+        let none =
+            segment_and_bind(&polyline, &arc, 1.0, &means, None, &SegmentParams { attach_size: None, ..params() });
         let none = none.unwrap();
         assert!(!none.attached.iter().any(|&a| a) && !none.rows.contains(&(tube as u32 + 40)));
     }
@@ -444,7 +597,7 @@ mod tests {
     fn bad_input_is_an_error() {
         let (polyline, arc, means) = scene();
         let bad = |polyline: &[[f64; 3]], arc: &[f64], params: SegmentParams| {
-            segment_and_bind(polyline, arc, 1.0, &means, &params).unwrap_err().to_string()
+            segment_and_bind(polyline, arc, 1.0, &means, None, &params).unwrap_err().to_string()
         };
         assert!(bad(&polyline[..1], &arc[..1], params()).contains("at least 2 vertices"));
         let mut nan = polyline.clone();
@@ -455,6 +608,70 @@ mod tests {
         assert!(bad(&polyline, &arc, SegmentParams { grow: f64::NAN, ..params() }).contains("grow must be"));
         assert!(bad(&polyline, &arc, SegmentParams { link_min: 0.0, ..params() }).contains("link must be"));
         let far = vec![[1e30_f32, 0.0, 0.0]];
-        assert!(segment_and_bind(&polyline, &arc, 1.0, &far, &params()).unwrap().rows.is_empty());
+        assert!(segment_and_bind(&polyline, &arc, 1.0, &far, None, &params()).unwrap().rows.is_empty());
+        let short = vec![[0.5_f32; 3]; means.len() - 1];
+        let err = segment_and_bind(&polyline, &arc, 1.0, &means, Some(&short), &params()).unwrap_err();
+        assert!(err.to_string().contains(&format!("{} colours for {} centres", means.len() - 1, means.len())));
+    }
+
+    /// The tube of `scene` (orange, its lower half `lower` where given), lying on a floor at y = R
+    /// (+y down) of centres 0.2 R apart out to 4 R beside the axis, coloured `floor`.
+    fn tube_on_floor(lower: Option<[f32; 3]>, floor: [f32; 3]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, usize) {
+        let (_, _, means) = scene();
+        let tube: Vec<[f32; 3]> = means[..201 * 12].to_vec();
+        let orange = [0.8, 0.5, 0.2];
+        let mut colours: Vec<[f32; 3]> =
+            tube.iter().map(|p| if p[1] > 0.0 { lower.unwrap_or(orange) } else { orange }).collect();
+        let mut all = tube;
+        let count = all.len();
+        for i in 0..=100 {
+            for k in -20..=20 {
+                all.push([i as f32 * 0.01, R as f32, k as f32 * 0.01]);
+                colours.push(floor);
+            }
+        }
+        (all, colours, count)
+    }
+
+    #[test]
+    fn a_floor_of_another_colour_under_the_part_is_left_out_and_a_shaded_side_or_a_floor_of_its_colour_is_not() {
+        let (polyline, arc, _) = scene();
+        let bound = |means: &[[f32; 3]], colours: &[[f32; 3]]| {
+            segment_and_bind(
+                &polyline,
+                &arc,
+                1.0,
+                means,
+                Some(colours),
+                &SegmentParams { attach_size: None, ..params() },
+            )
+            .unwrap()
+            .rows
+        };
+        // a grey floor: the whole tube is bound and no floor centre is
+        let (means, colours, tube) = tube_on_floor(None, [0.5, 0.45, 0.4]);
+        let rows = bound(&means, &colours);
+        assert_eq!(rows, (0..tube as u32).collect::<Vec<_>>());
+        // without colours the floor within 2.5 R is bound, as before
+        let blind =
+            segment_and_bind(&polyline, &arc, 1.0, &means, None, &SegmentParams { attach_size: None, ..params() });
+        assert!(blind.unwrap().rows.len() > tube + 500);
+        // a floor of the tube's own colour tells nothing: bound as before
+        let (means, colours, tube) = tube_on_floor(None, [0.8, 0.5, 0.2]);
+        assert!(bound(&means, &colours).len() > tube + 500);
+        // a tube whose lower half is shaded like the floor, with no floor: all of it is bound
+        let (means, colours, tube) = tube_on_floor(Some([0.5, 0.45, 0.4]), [0.5, 0.45, 0.4]);
+        let (shaded, shaded_colours) = (&means[..tube], &colours[..tube]);
+        let mut around = shaded.to_vec();
+        let mut around_colours = shaded_colours.to_vec();
+        for i in 0..=100 {
+            for k in 0..8 {
+                // what lies just past the reach, the colour of the shaded side: a rail beside it
+                around.push([i as f32 * 0.01, -2.8 * R as f32, (k as f32 - 3.5) * 0.1 * R as f32]);
+                around_colours.push([0.5, 0.45, 0.4]);
+            }
+        }
+        let rows = bound(&around, &around_colours);
+        assert!((0..tube as u32).all(|r| rows.binary_search(&r).is_ok()));
     }
 }

@@ -98,14 +98,17 @@ type BindingArrays<'py> = (
     Bound<'py, PyArray2<f32>>,
     Bound<'py, PyArray1<f32>>,
     Bound<'py, PyArray1<bool>>,
+    Option<([f32; 3], [f32; 3])>,
 );
 
 /// The Gaussians of `means` (N, 3) float32 that follow the rod on `polyline` (M, 3) float64, bound
 /// (`sketchrodgs_polyline::segment`): `arc` (M,) float64 arc lengths at the vertices, `length` the
 /// rod's length, `radius` R; `grow`, `link_min`, `link_max` and `end_margin` in radii;
-/// `attach_size` None attaches nothing.
+/// `attach_size` None attaches nothing. With `colours` (N, 3) float32, a surface of another colour
+/// under the part is left out of it; the last entry is then (the part's colour, the surface's),
+/// else None.
 #[pyfunction]
-#[pyo3(signature = (polyline, arc, length, means, radius, grow, link_spacings, link_min, link_max, attach_size, end_margin))]
+#[pyo3(signature = (polyline, arc, length, means, radius, grow, link_spacings, link_min, link_max, attach_size, end_margin, colours=None))]
 #[allow(clippy::too_many_arguments)]
 fn segment_and_bind<'py>(
     py: Python<'py>,
@@ -120,18 +123,25 @@ fn segment_and_bind<'py>(
     link_max: f64,
     attach_size: Option<f64>,
     end_margin: f64,
+    colours: Option<&Bound<'py, PyArray2<f32>>>,
 ) -> PyResult<BindingArrays<'py>> {
     let (polyline, arc, means) = (polyline.try_readonly()?, arc.try_readonly()?, means.try_readonly()?);
     check_shape("polyline", polyline.shape(), &[None, Some(3)])?;
     check_shape("arc", arc.shape(), &[Some(polyline.shape()[0])])?;
     check_shape("means", means.shape(), &[None, Some(3)])?;
+    let colours = colours.map(|c| c.try_readonly()).transpose()?;
+    if let Some(colours) = &colours {
+        check_shape("colours", colours.shape(), &[Some(means.shape()[0]), Some(3)])?;
+    }
     let polyline: &[[f64; 3]] = as_rows(contiguous(&polyline, "polyline")?);
     let arc = contiguous(&arc, "arc")?;
     let means: &[[f32; 3]] = as_rows(contiguous(&means, "means")?);
+    let colours: Option<&[[f32; 3]]> = colours.as_ref().map(|c| contiguous(c, "colours")).transpose()?.map(as_rows);
     let params = SegmentParams { radius, grow, link_spacings, link_min, link_max, attach_size, end_margin };
-    let binding =
-        run_parallel(py, "segment_and_bind", || segment::segment_and_bind(polyline, arc, length, means, &params))?
-            .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
+    let binding = run_parallel(py, "segment_and_bind", || {
+        segment::segment_and_bind(polyline, arc, length, means, colours, &params)
+    })?
+    .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
     let count = binding.rows.len();
     let offset = numpy::ndarray::Array2::from_shape_vec((count, 3), binding.offset.into_flattened())
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
@@ -142,6 +152,7 @@ fn segment_and_bind<'py>(
         offset.into_pyarray(py),
         binding.distance.into_pyarray(py),
         binding.attached.into_pyarray(py),
+        binding.surface.map(|s| (s.part_colour, s.colour)),
     ))
 }
 
