@@ -140,22 +140,34 @@ def tube_scene(
     return TubeScene(scene, axes, radius, np.concatenate(labels))
 
 
-def rope_on_floor_scene(radius: float = 0.01, *, seed: int = 0, floor_count: int = 60_000) -> TubeScene:
+def rope_on_floor_scene(
+    radius: float = 0.01,
+    *,
+    seed: int = 0,
+    floor_count: int = 60_000,
+    floor_scatter: float = 0.0,
+    floor_colour_spread: float = 0.05,
+) -> TubeScene:
     """A rope lying on a floor: a gently winding tube along x in the plane y = 0 (its axis `radius`
     above the floor, so it touches it), on a grey floor of flat Gaussians at y = `radius`
-    (+y is down). The floor's Gaussians are labelled -1. What lies under a part at its own depth
-    (a cable on a table, a sprinkle on icing) shows no depth edge beside the part."""
+    (+y is down), their heights scattered by `floor_scatter` radii and their colours by
+    `floor_colour_spread` (standard deviations). The floor's Gaussians are labelled -1. What lies
+    under a part at its own depth (a cable on a table, a sprinkle on icing) shows no depth edge
+    beside the part."""
     rng = np.random.default_rng(seed)
     arrays, axis = tube_gaussians(
         lambda u: np.stack([-0.25 + 0.5 * u, np.zeros_like(u), 0.03 * np.sin(6 * u)], axis=1), radius, rng
     )
     n = floor_count
     floor = {
-        "means": np.stack([rng.uniform(-0.4, 0.4, n), np.full(n, radius), rng.uniform(-0.3, 0.3, n)], axis=1),
+        "means": np.stack(
+            [rng.uniform(-0.4, 0.4, n), radius + rng.normal(0, floor_scatter * radius, n), rng.uniform(-0.3, 0.3, n)],
+            axis=1,
+        ),
         "scales": np.stack([rng.uniform(0.3, 0.8, n), np.full(n, 0.05), rng.uniform(0.3, 0.8, n)], axis=1) * radius,
         "quats": np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
         "opacities": np.full(n, 0.9),
-        "colors": np.clip(np.array([0.5, 0.45, 0.4]) + rng.normal(0, 0.05, (n, 3)), 0, 1),
+        "colors": np.clip(np.array([0.5, 0.45, 0.4]) + rng.normal(0, floor_colour_spread, (n, 3)), 0, 1),
     }
     merged = {k: np.concatenate([arrays[k], floor[k]]) for k in arrays}
     scene = GaussianScene.from_colors(

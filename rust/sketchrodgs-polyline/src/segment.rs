@@ -98,9 +98,10 @@ const SURFACE_LEAST_GAP: f32 = 0.2;
 const SURFACE_LEAST_CENTRES: usize = 8;
 /// A surface is a sheet: its centres near the part scatter along their mean direction from the axis
 /// (its thickness) by at most this share of their scatter across it, beside the axis (its width;
-/// standard deviations). The floor under a rope: 0.04-0.05; a clean half tube, 0.5; a tree
-/// branch's side in shade, which is another colour too: 0.70-0.99.
-const SHEET_FLATNESS: f64 = 0.25;
+/// standard deviations). The floor under a rope: 0.04-0.05, about 0.3 with its heights scattered
+/// by 0.4 R (at 0.25 that floor stayed bound); a clean half tube, 0.5; a tree branch's side in
+/// shade, which is another colour too: 0.70-0.99.
+const SHEET_FLATNESS: f64 = 0.4;
 
 /// A part lying on a surface of another colour (a cable on a table, a rope on a floor;
 /// docs/deformation.md, "Segmentation", **A surface under the part**): the surface runs through
