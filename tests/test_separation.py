@@ -26,9 +26,10 @@ def split_pairs(means: np.ndarray, moving_rows: np.ndarray, radius: float) -> in
     return int((moves[pairs[:, 0]] != moves[pairs[:, 1]]).sum())
 
 
-def tube_with_crossing_bar() -> tuple[GaussianScene, np.ndarray]:
+def tube_with_crossing_bar(colour: tuple[float, float, float] | None = None) -> tuple[GaussianScene, np.ndarray]:
     """The synthetic straight tube (axis AXIS, R = 0.01) and a bar of radius R running across it
-    along z, its surface touching the tube's; the rows of the bar."""
+    along z, its surface touching the tube's, of the tube's colour (as a crossing branch is) or
+    `colour`; the rows of the bar."""
     tube = synthetic.tube_scene([synthetic.straight], radius=R, clutter=0, seed=2).scene
     # the bar: a dense disk of centres per slice, its axis 2.1 R below the tube's
     ring = np.array([(u, v) for u in np.arange(-R, R + 1e-9, 0.2 * R) for v in np.arange(-R, R + 1e-9, 0.2 * R)])
@@ -41,7 +42,7 @@ def tube_with_crossing_bar() -> tuple[GaussianScene, np.ndarray]:
         np.concatenate([tube.scales, np.full((n, 3), 0.002)]),
         np.concatenate([tube.quats, np.tile([1.0, 0, 0, 0], (n, 1))]),
         np.concatenate([tube.opacities, np.full(n, 0.8)]),
-        np.concatenate([tube.colors, np.full((n, 3), 0.5)]),
+        np.concatenate([tube.colors, np.tile(np.median(tube.colors, axis=0) if colour is None else colour, (n, 1))]),
     )
     return scene, np.arange(len(tube), len(scene))
 
@@ -64,6 +65,16 @@ def test_the_part_leaves_the_piece_of_a_crossing_bar_and_keeps_its_own_skin():
     rows = np.array([entry[row] for row in trimmed.gaussian_ids.tolist()])
     assert np.array_equal(binding.offset[rows], trimmed.offset)
     assert np.array_equal(binding.segment[rows], trimmed.segment)
+
+
+def test_a_crossing_bar_of_another_colour_is_left_out_before_any_cut():
+    """A grey bar across the orange tube is a surface the part lies on (another colour, and flat
+    beside the axis): the segmentation leaves it out (docs/deformation.md, "Segmentation")."""
+    scene, bar = tube_with_crossing_bar(colour=(0.5, 0.5, 0.5))
+    binding = segment_and_bind(AXIS, scene, R)
+    assert len(np.intersect1d(binding.gaussian_ids, bar)) == 0
+    tube = np.setdiff1d(np.arange(len(scene)), bar)
+    assert np.isin(tube, binding.gaussian_ids).mean() > 0.99
 
 
 def test_the_cut_splits_the_fewest_pairs_and_keeps_all_it_can():
