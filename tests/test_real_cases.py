@@ -1,4 +1,5 @@
-"""The real-capture stroke set (tests/data/real_cases/cases.json) is well formed."""
+"""The real-capture stroke set (tests/data/real_cases/cases.json) is well formed, and the number
+changes to extraction are compared by (`CaseScore.log_excess`) adds up what it should."""
 
 from __future__ import annotations
 
@@ -47,3 +48,32 @@ def test_case(case: dict) -> None:
     }
     for i in range(len(directions)):
         assert any(29.5 <= a <= 90.5 for pair, a in angles.items() if i in pair)
+
+
+def test_log_excess_sums_how_far_each_missed_distance_is_from_its_target() -> None:
+    """The number changes to extraction are compared by: only the issue's missed distances count,
+    each as ln(measured / target); the radius targets and our folding back do not; an unmeasurable
+    distance is infinitely far."""
+    from sketchrodgs.realcases import CaseScore
+
+    met = dict(cross_mean=0.1, cross_max=0.5, cross_mean_estimated=0.1, cross_max_estimated=0.5, reverse_max=0.0)
+    score = CaseScore(
+        name="c",
+        views=3,
+        failures=0,
+        **met,
+        jitter_mean=0.1,
+        jitter_max=3.0,
+        jitter_failures=0,
+        jitter_count=30,
+        radius_low=0.5,
+        radius_high=2.0,
+        radius_spread=4.0,
+        jaccard=0.9,
+        end_gap=1.0,
+        fold_back=5.0,
+    )
+    assert score.log_excess() == pytest.approx(np.log(3.0 / 1.5))
+    assert len(score.misses()) == 4  # jitter max, folding back, the radius range and spread
+    score.cross_max = np.inf
+    assert score.log_excess() == np.inf

@@ -125,6 +125,23 @@ class CaseScore:
         ]
         return [what for what, ok in checks if not ok]
 
+    def log_excess(self) -> float:
+        """The sum, over the issue's distance targets this case misses (views with R given and
+        estimated, reversed, jitter), of ln(measured / target): how far it is from meeting them,
+        the figure changes to extraction are compared by (docs/extraction.md, "Measured on real
+        captures"). inf where such a distance is not measurable (two rods that do not overlap)."""
+        t = TARGETS
+        pairs = [
+            (self.cross_mean, t["cross_mean"]),
+            (self.cross_max, t["cross_max"]),
+            (self.cross_mean_estimated, t["cross_mean"]),
+            (self.cross_max_estimated, t["cross_max"]),
+            (self.reverse_max, t["reverse_max"]),
+            (self.jitter_mean, t["jitter_mean"]),
+            (self.jitter_max, t["jitter_max"]),
+        ]
+        return float(sum(np.log(v / target) if np.isfinite(v) else np.inf for v, target in pairs if not v <= target))
+
 
 def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10) -> list[ViewResult]:
     """Extract every view of `case`: R given and estimated, the reversed stroke, `jitter` jittered
