@@ -15,6 +15,7 @@
 //! in `f32` (as NumPy compares a `float32` array with a Python float), and the arc lengths come
 //! from the caller.
 
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::proximity::{self, ProximityError};
@@ -151,45 +152,25 @@ fn surface_left_out(kind: &mut [u8], near: &Centres, colours: &[[f32; 3]], rod: 
 /// offsets from their nearest points on the polyline, along the mean of those offsets' directions
 /// and across it (perpendicular to that and to the polyline there).
 fn is_sheet(which: &[usize], near: &Centres, rod: &Rod) -> bool {
-    let dot = |a: &[f64; 3], b: &[f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let unit = |v: [f64; 3]| {
-        let length = dot(&v, &v).sqrt();
-        (length > 0.0).then(|| v.map(|c| c / length))
-    };
-    let (offsets, tangents): (Vec<[f64; 3]>, Vec<[f64; 3]>) = which
+    let (offsets, tangents): (Vec<DVec3>, Vec<DVec3>) = which
         .iter()
         .map(|&i| {
             let (n, p) = (&near.nearest[i], near.points[i]);
-            let (a, b) = (rod.polyline[n.segment as usize], rod.polyline[n.segment as usize + 1]);
-            let t = f64::from(n.t);
-            let offset = std::array::from_fn(|k| f64::from(p[k]) - (a[k] + t * (b[k] - a[k])));
-            (offset, unit(std::array::from_fn(|k| b[k] - a[k])).unwrap_or_default())
+            let a = DVec3::from(rod.polyline[n.segment as usize]);
+            let b = DVec3::from(rod.polyline[n.segment as usize + 1]);
+            (Vec3::from(p).as_dvec3() - a.lerp(b, f64::from(n.t)), (b - a).normalize_or_zero())
         })
         .unzip();
-    let mut direction = [0.0; 3];
-    for o in offsets.iter().filter_map(|&o| unit(o)) {
-        (0..3).for_each(|k| direction[k] += o[k]);
+    let direction = offsets.iter().map(|o| o.normalize_or_zero()).sum::<DVec3>().normalize_or_zero();
+    if direction == DVec3::ZERO {
+        return false;
     }
-    let Some(direction) = unit(direction) else { return false };
     let deviation = |values: Vec<f64>| {
         let mean = values.iter().sum::<f64>() / values.len() as f64;
         (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64).sqrt()
     };
-    let thickness = deviation(offsets.iter().map(|o| dot(o, &direction)).collect());
-    let width = deviation(
-        offsets
-            .iter()
-            .zip(&tangents)
-            .map(|(o, t)| {
-                let across = [
-                    t[1] * direction[2] - t[2] * direction[1],
-                    t[2] * direction[0] - t[0] * direction[2],
-                    t[0] * direction[1] - t[1] * direction[0],
-                ];
-                dot(o, &across)
-            })
-            .collect(),
-    );
+    let thickness = deviation(offsets.iter().map(|o| o.dot(direction)).collect());
+    let width = deviation(offsets.iter().zip(&tangents).map(|(o, t)| o.dot(t.cross(direction))).collect());
     thickness <= SHEET_FLATNESS * width
 }
 
