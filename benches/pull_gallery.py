@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from sketchrodgs import Camera, data, extract_rod, load_scene, render, segment, synthetic
+from sketchrodgs import data, extract_rod, load_scene, render, segment, synthetic
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.images import save_png, to_uint8
 from sketchrodgs.realcases import load_cases
@@ -85,12 +85,8 @@ def rope_on_floor(out: Path) -> None:
     before and after the floor under it was left out of the part (docs/deformation.md,
     "Segmentation")."""
     tubes = synthetic.rope_on_floor_scene(radius=0.01, seed=1)
-    tilt = np.radians(60)
-    camera = Camera.look_at(
-        (0.0, -0.6 * np.sin(tilt), -0.6 * np.cos(tilt)), (0, 0, 0), up=(0, -1, 0), width=960, height=540, fov_y_deg=50
-    )
-    uv, _ = camera.project(tubes.axes[0][::100])
-    stroke = uv + np.random.default_rng(0).normal(0, 2.0, uv.shape)
+    camera = synthetic.floor_camera(60)
+    stroke = synthetic.floor_stroke(tubes.axes[0], camera)
 
     def lifted(colours: bool) -> tuple[np.ndarray, int]:
         keep = segment._part_and_attached

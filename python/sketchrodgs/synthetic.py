@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .camera import Camera
 from .polyline import arc_lengths
 from .scene import GaussianScene
 
@@ -160,21 +161,35 @@ def rope_on_floor_scene(
     )
     n = floor_count
     floor = {
-        "means": np.stack(
-            [rng.uniform(-0.4, 0.4, n), radius + rng.normal(0, floor_scatter * radius, n), rng.uniform(-0.3, 0.3, n)],
-            axis=1,
-        ),
+        "means": np.stack([rng.uniform(-0.4, 0.4, n), np.full(n, radius), rng.uniform(-0.3, 0.3, n)], axis=1),
         "scales": np.stack([rng.uniform(0.3, 0.8, n), np.full(n, 0.05), rng.uniform(0.3, 0.8, n)], axis=1) * radius,
         "quats": np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
         "opacities": np.full(n, 0.9),
         "colors": np.clip(np.array([0.5, 0.45, 0.4]) + rng.normal(0, floor_colour_spread, (n, 3)), 0, 1),
     }
+    if floor_scatter:  # drawn last, so that the flat floor's draws are the same with or without it
+        floor["means"][:, 1] += rng.normal(0, floor_scatter * radius, n)
     merged = {k: np.concatenate([arrays[k], floor[k]]) for k in arrays}
     scene = GaussianScene.from_colors(
         merged["means"], merged["scales"], merged["quats"], merged["opacities"], merged["colors"]
     )
     labels = np.concatenate([np.zeros(len(arrays["means"]), np.int32), np.full(n, -1, np.int32)])
     return TubeScene(scene, [axis], radius, labels)
+
+
+def floor_camera(tilt_deg: float) -> Camera:
+    """A 960x540 camera looking down at `rope_on_floor_scene`'s rope, `tilt_deg` above the floor's
+    plane."""
+    t = np.radians(tilt_deg)
+    eye = (0.0, -0.6 * np.sin(t), -0.6 * np.cos(t))
+    return Camera.look_at(eye, (0, 0, 0), up=(0, -1, 0), width=960, height=540, fov_y_deg=50)
+
+
+def floor_stroke(axis: np.ndarray, camera: Camera) -> np.ndarray:
+    """A stroke along the rope's `axis` seen by `camera`: every 100th axis sample projected, with
+    2 px of hand noise."""
+    uv, _ = camera.project(axis[::100])
+    return uv + np.random.default_rng(0).normal(0, 2.0, uv.shape)
 
 
 # -- curves used by the tests and benchmarks (parameters in [0, 1]) -----------------------------

@@ -186,7 +186,7 @@ fn median(values: &mut [f32]) -> f32 {
 }
 
 fn colour_distance(a: &[f32; 3], b: &[f32; 3]) -> f32 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    Vec3::from(*a).distance(Vec3::from(*b))
 }
 
 /// The Gaussians (centres `means`) that follow the rod on `polyline`, bound (see the module
