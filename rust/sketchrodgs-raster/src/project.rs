@@ -12,6 +12,8 @@ use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
 
 /// Gaussians per rayon task in the per-Gaussian passes.
 pub(crate) const MIN_GAUSSIANS_PER_TASK: usize = 4096;
+/// `ln(ALPHA_MIN)`, `ln(1/255)`.
+const LN_ALPHA_MIN: f32 = -5.541_263_5;
 
 /// What compositing needs of one projected Gaussian.
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Zeroable)]
@@ -20,14 +22,13 @@ pub struct Splat2D {
     pub mean: [f32; 2],
     /// Inverse 2D covariance `(A, B, C)`: `power = -0.5 (A dx² + C dy²) - B dx dy`.
     pub conic: [f32; 3],
-    pub opacity: f32,
+    /// `log2(opacity)`: compositing takes `alpha = min(0.99, 2^(log2(opacity) + power log2(e)))`,
+    /// the opacity folded into the exponent (docs/rendering.md, step 9).
+    pub log2_opacity: f32,
     /// View-dependent colour (zero in index-only mode).
     pub color: [f32; 3],
     /// Camera z of the centre.
     pub depth: f32,
-    /// Below this `power`, `opacity * exp(power) < 1/255` for certain (with a 1e-3 margin for
-    /// rounding), so compositing can skip a group of pixels without evaluating `exp`.
-    pub power_floor: f32,
     /// Inclusive pixel box `[x0, y0, x1, y1]`, clipped to the image, outside which alpha < 1/255
     /// (pixels outside it would be skipped anyway, so compositing never visits them).
     pub pixel_box: [u16; 4],
@@ -371,7 +372,7 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
     let mut valid = [false; LANES];
     let (mut mean_u, mut mean_v, mut depth) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
     let mut conic = [[0.0f32; LANES]; 3];
-    let mut power_floor = [0.0f32; LANES];
+    let mut log2_opacity = [0.0f32; LANES];
     let mut pixel_box = [[0u16; LANES]; 4];
     let mut rect = [[0u16; LANES]; 4];
     for l in 0..LANES {
@@ -449,7 +450,8 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
 
         valid[l] = ok;
         (mean_u[l], mean_v[l], depth[l]) = (u, v, z);
-        power_floor[l] = -0.5 * tau - 1e-3;
+        // ln(opacity) = tau / 2 + ln(1/255), from the ln just taken
+        log2_opacity[l] = (0.5 * tau + LN_ALPHA_MIN) * std::f32::consts::LOG2_E;
         for k in 0..4 {
             pixel_box[k][l] = pixels[k];
             rect[k][l] = clipped[k];
@@ -460,10 +462,9 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
             let splat = Splat2D {
                 mean: [mean_u[l], mean_v[l]],
                 conic: [conic[0][l], conic[1][l], conic[2][l]],
-                opacity: opacity[l],
+                log2_opacity: log2_opacity[l],
                 color: [0.0; 3],
                 depth: depth[l],
-                power_floor: power_floor[l],
                 pixel_box: [pixel_box[0][l], pixel_box[1][l], pixel_box[2][l], pixel_box[3][l]],
             };
             let [x0, y0, x1, y1] = [rect[0][l], rect[1][l], rect[2][l], rect[3][l]];

@@ -34,18 +34,19 @@ impl Simd {
 }
 
 /// A vector of `N` f32 lanes, and the few operations blending needs on it. Loads and stores work
-/// on 16-wide rows (a tile row): group `g` is lanes `g * N .. (g + 1) * N`.
+/// on 16-wide rows (a tile row): the window at `at` is elements `at .. at + N` (`at <= 16 - N`;
+/// a window past the row's end loads zeros and stores nothing).
 pub trait Lanes: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> {
     const N: usize;
     type Mask: LaneMask<Self>;
     fn splat(v: f32) -> Self;
     /// `0, 1, .., N - 1`.
     fn ramp() -> Self;
-    fn load(row: &[f32; 16], group: usize) -> Self;
-    fn store(self, row: &mut [f32; 16], group: usize);
-    /// Four u32 per f32 lane, reinterpreted (for selecting integers with a mask).
-    fn load_bits(row: &[u32; 16], group: usize) -> Self;
-    fn store_bits(self, row: &mut [u32; 16], group: usize);
+    fn load(row: &[f32; 16], at: usize) -> Self;
+    fn store(self, row: &mut [f32; 16], at: usize);
+    /// u32 lanes, reinterpreted (for selecting integers with a mask).
+    fn load_bits(row: &[u32; 16], at: usize) -> Self;
+    fn store_bits(self, row: &mut [u32; 16], at: usize);
     fn splat_bits(v: u32) -> Self;
     /// Lane-wise minimum; `other` where `self` is NaN (`minps`).
     fn min(self, other: Self) -> Self;
@@ -55,30 +56,47 @@ pub trait Lanes: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = S
     fn le(self, other: Self) -> Self::Mask;
     fn ge(self, other: Self) -> Self::Mask;
     fn gt(self, other: Self) -> Self::Mask;
-    /// `2^k` for the integers `k` held in the low mantissa bits of `self` (see `exp_nonpositive`).
+    /// `2^k` for the integers `k` held in the low mantissa bits of `self` (see `exp2`).
     fn pow2_from_rounded(self, round_bits: u32) -> Self;
 
-    /// `exp(x)` for `x <= 0` (Cody-Waite reduction and the Cephes `expf` polynomial; relative
-    /// error below 4e-7). Inputs below -80 give about 2e-35, far below any alpha that counts.
+    /// `2^x` (range reduction to `r` in [-0.5, 0.5] and the Cephes `exp2f` polynomial, relative
+    /// error below 2.5e-7), for `x` up to 127; inputs below -126 (NaN included) give `2^-126`, far
+    /// below any alpha that counts. The polynomial is evaluated by Estrin's scheme: three levels
+    /// instead of Horner's five, since blending waits on this chain (docs/rendering.md, "Speed at
+    /// capture size").
     #[inline(always)]
-    fn exp_nonpositive(self) -> Self {
-        const LOG2E: f32 = std::f32::consts::LOG2_E;
-        const LN2_HI: f32 = 0.693_359_4;
-        const LN2_LO: f32 = -2.121_944_4e-4;
+    fn exp2(self) -> Self {
         // Adding 1.5 * 2^23 rounds to an integer, which then sits in the low mantissa bits.
         const ROUND: f32 = 12_582_912.0;
-        const POLY: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 0.5];
+        const P: [f32; 6] =
+            [1.535_336_2e-4, 1.339_887_4e-3, 9.618_437e-3, 5.550_332_5e-2, 2.402_264_8e-1, 6.931_472e-1];
         let s = Self::splat;
-        let x = self.max(s(-80.0)).min(s(0.0));
-        let shifted = x * s(LOG2E) + s(ROUND);
-        let n = shifted - s(ROUND);
-        let r = x - n * s(LN2_HI) - n * s(LN2_LO);
-        let mut p = s(POLY[0]);
-        for c in &POLY[1..] {
-            p = p * r + s(*c);
-        }
-        let e_r = p * r * r + r + s(1.0);
+        let x = self.max(s(-126.0));
+        let shifted = x + s(ROUND);
+        let r = x - (shifted - s(ROUND));
+        // Estrin's scheme: 1 + r P(r) = (1 + P5 r) + r² (P4 + P3 r) + r⁴ (P2 + P1 r + P0 r²), so that
+        // no term waits on more than five operations before the scaling (Horner's: eleven)
+        let r2 = r * r;
+        let r4 = r2 * r2;
+        let first = s(1.0) + s(P[5]) * r;
+        let second = s(P[4]) + s(P[3]) * r;
+        let third = (s(P[2]) + s(P[1]) * r) + s(P[0]) * r2;
+        let e_r = (first + r2 * second) + r4 * third;
         e_r * shifted.pow2_from_rounded(ROUND.to_bits())
+    }
+}
+
+/// Elements `at .. at + N` of a tile row (zeros past its end, which blending never asks for).
+#[inline(always)]
+fn window<const N: usize, T: Copy + bytemuck::Zeroable>(row: &[T; 16], at: usize) -> [T; N] {
+    row.get(at..at + N).and_then(|w| w.try_into().ok()).unwrap_or([T::zeroed(); N])
+}
+
+/// Writes `values` over elements `at .. at + N` of a tile row (nothing past its end).
+#[inline(always)]
+fn put_window<const N: usize, T: Copy>(row: &mut [T; 16], at: usize, values: [T; N]) {
+    if let Some(w) = row.get_mut(at..at + N) {
+        w.copy_from_slice(&values);
     }
 }
 
@@ -300,20 +318,20 @@ impl Lanes for F32x4 {
         Self(imp::from_array([0.0, 1.0, 2.0, 3.0]))
     }
     #[inline(always)]
-    fn load(row: &[f32; 16], group: usize) -> Self {
-        Self(imp::from_array(row.as_chunks::<4>().0[group]))
+    fn load(row: &[f32; 16], at: usize) -> Self {
+        Self(imp::from_array(window(row, at)))
     }
     #[inline(always)]
-    fn store(self, row: &mut [f32; 16], group: usize) {
-        row.as_chunks_mut::<4>().0[group] = imp::to_array(self.0);
+    fn store(self, row: &mut [f32; 16], at: usize) {
+        put_window(row, at, imp::to_array(self.0));
     }
     #[inline(always)]
-    fn load_bits(row: &[u32; 16], group: usize) -> Self {
-        Self(imp::from_bits(row.as_chunks::<4>().0[group]))
+    fn load_bits(row: &[u32; 16], at: usize) -> Self {
+        Self(imp::from_bits(window(row, at)))
     }
     #[inline(always)]
-    fn store_bits(self, row: &mut [u32; 16], group: usize) {
-        row.as_chunks_mut::<4>().0[group] = imp::to_bits(self.0);
+    fn store_bits(self, row: &mut [u32; 16], at: usize) {
+        put_window(row, at, imp::to_bits(self.0));
     }
     #[inline(always)]
     fn splat_bits(v: u32) -> Self {
@@ -436,7 +454,7 @@ mod avx2 {
     };
     use std::ops::{Add, Mul, Sub};
 
-    use super::{LaneMask, Lanes};
+    use super::{LaneMask, Lanes, put_window, window};
 
     /// Eight f32 lanes.
     #[derive(Clone, Copy, Debug)]
@@ -458,20 +476,20 @@ mod avx2 {
             Self(bytemuck::cast([0.0f32, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]))
         }
         #[inline(always)]
-        fn load(row: &[f32; 16], group: usize) -> Self {
-            Self(bytemuck::cast(row.as_chunks::<8>().0[group]))
+        fn load(row: &[f32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(window::<8, f32>(row, at)))
         }
         #[inline(always)]
-        fn store(self, row: &mut [f32; 16], group: usize) {
-            row.as_chunks_mut::<8>().0[group] = bytemuck::cast(self.0);
+        fn store(self, row: &mut [f32; 16], at: usize) {
+            put_window::<8, f32>(row, at, bytemuck::cast(self.0));
         }
         #[inline(always)]
-        fn load_bits(row: &[u32; 16], group: usize) -> Self {
-            Self(bytemuck::cast(row.as_chunks::<8>().0[group]))
+        fn load_bits(row: &[u32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(window::<8, u32>(row, at)))
         }
         #[inline(always)]
-        fn store_bits(self, row: &mut [u32; 16], group: usize) {
-            row.as_chunks_mut::<8>().0[group] = bytemuck::cast(self.0);
+        fn store_bits(self, row: &mut [u32; 16], at: usize) {
+            put_window::<8, u32>(row, at, bytemuck::cast(self.0));
         }
         #[inline(always)]
         fn splat_bits(v: u32) -> Self {
@@ -574,20 +592,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn exp_matches_std_to_a_few_ulp() {
+    fn exp2_matches_std_to_a_few_ulp() {
         let mut worst = 0.0f32;
-        let mut x = 0.0f32;
-        while x > -80.0 {
-            let fast = F32x4::from_array([x, x * 0.5, x * 0.25, x * 0.125]).exp_nonpositive().to_array();
-            for (f, v) in fast.iter().zip([x, x * 0.5, x * 0.25, x * 0.125]) {
-                worst = worst.max((f - v.exp()).abs() / v.exp());
+        let mut x = 0.5f32;
+        while x > -126.0 {
+            let xs = [x, x * 0.5, x * 0.25, x * 0.125];
+            let fast = F32x4::from_array(xs).exp2().to_array();
+            for (f, v) in fast.iter().zip(xs) {
+                worst = worst.max((f - v.exp2()).abs() / v.exp2());
             }
             x -= 0.000_731;
         }
-        assert!(worst < 4e-7, "worst relative error {worst}");
-        let edge = F32x4::from_array([0.0, -1e30, f32::NEG_INFINITY, -80.0]).exp_nonpositive().to_array();
+        assert!(worst < 2.5e-7, "worst relative error {worst}");
+        let edge = F32x4::from_array([0.0, -1e30, f32::NEG_INFINITY, f32::NAN]).exp2().to_array();
         assert_eq!(edge[0], 1.0);
-        assert!(edge[1] < 1e-30 && edge[2] < 1e-30 && edge[3] < 1e-30);
+        assert!(edge[1..].iter().all(|&e| e == 2f32.powi(-126)), "{edge:?}");
     }
 
     /// The portable lanes give the SSE results bit for bit, NaN and infinities included.
@@ -626,10 +645,7 @@ mod tests {
             assert_eq!(bits(sse::to_array(sse::or(sa, sb))), bits(portable::or(a, b)));
             assert_eq!(sse::bits(sse::lt(sa, sb)), portable::bits(portable::lt(a, b)));
             let rounded = sse::add(
-                sse::mul(
-                    sse::min(sse::max(sa, sse::splat(-80.0)), sse::splat(0.0)),
-                    sse::splat(std::f32::consts::LOG2_E),
-                ),
+                sse::mul(sse::min(sse::max(sa, sse::splat(-126.0)), sse::splat(127.0)), sse::splat(1.0)),
                 sse::splat(12_582_912.0),
             );
             let round_bits = 12_582_912.0f32.to_bits();
@@ -681,12 +697,13 @@ mod tests {
         for (a, b) in values.chunks_exact(16).zip(values.chunks_exact(16).rev()) {
             let (a, b) = (row(a), row(b));
             for g in 0..2 {
-                let (a8, b8) = (F32x8::load(&a, g), F32x8::load(&b, g));
+                let (a8, b8) = (F32x8::load(&a, 8 * g), F32x8::load(&b, 8 * g));
                 let (mut wide, mut narrow) = ([0.0f32; 16], [0.0f32; 16]);
                 let mut same = |f8: &dyn Fn(F32x8, F32x8) -> F32x8, f4: &dyn Fn(F32x4, F32x4) -> F32x4| {
-                    f8(a8, b8).store(&mut wide, g);
+                    f8(a8, b8).store(&mut wide, 8 * g);
                     for h in 0..2 {
-                        f4(F32x4::load(&a, 2 * g + h), F32x4::load(&b, 2 * g + h)).store(&mut narrow, 2 * g + h);
+                        f4(F32x4::load(&a, 8 * g + 4 * h), F32x4::load(&b, 8 * g + 4 * h))
+                            .store(&mut narrow, 8 * g + 4 * h);
                     }
                     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                     assert_eq!(bits(&wide[g * 8..g * 8 + 8]), bits(&narrow[g * 8..g * 8 + 8]));
@@ -696,13 +713,13 @@ mod tests {
                 same(&|x, y| x * y, &|x, y| x * y);
                 same(&|x, y| x.min(y), &|x, y| x.min(y));
                 same(&|x, y| x.max(y), &|x, y| x.max(y));
-                same(&|x, _| x.exp_nonpositive(), &|x, _| x.exp_nonpositive());
+                same(&|x, _| x.exp2(), &|x, _| x.exp2());
                 same(&|x, y| x.lt(y).select(x, y), &|x, y| x.lt(y).select(x, y));
                 same(&|x, y| x.le(y).keep(x), &|x, y| x.le(y).keep(x));
                 same(&|x, y| x.ge(y).and_not(y.gt(x)).select(y, x), &|x, y| x.ge(y).and_not(y.gt(x)).select(y, x));
                 let bits8 = a8.lt(b8).bits();
-                let bits4 = F32x4::load(&a, 2 * g).lt(F32x4::load(&b, 2 * g)).bits()
-                    | F32x4::load(&a, 2 * g + 1).lt(F32x4::load(&b, 2 * g + 1)).bits() << 4;
+                let bits4 = F32x4::load(&a, 8 * g).lt(F32x4::load(&b, 8 * g)).bits()
+                    | F32x4::load(&a, 8 * g + 4).lt(F32x4::load(&b, 8 * g + 4)).bits() << 4;
                 assert_eq!(bits8, bits4);
             }
         }
@@ -712,7 +729,7 @@ mod tests {
         let mut ids = [0u32; 16];
         let ramp: [u32; 16] = std::array::from_fn(|i| i as u32);
         let lt = F32x8::ramp().lt(F32x8::splat(3.0));
-        lt.select(F32x8::splat_bits(9), F32x8::load_bits(&ramp, 1)).store_bits(&mut ids, 1);
+        lt.select(F32x8::splat_bits(9), F32x8::load_bits(&ramp, 8)).store_bits(&mut ids, 8);
         assert_eq!(ids[8..], [9, 9, 9, 11, 12, 13, 14, 15]);
     }
 }
