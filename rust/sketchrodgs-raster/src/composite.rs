@@ -302,8 +302,7 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
         }
         let col0 = tile_x * TILE;
         let cols = TILE.min(width - col0);
-        // the x of the pixels of the window at each column, for every Gaussian of the tile
-        let columns: [V; TILE] = std::array::from_fn(|at| V::splat((col0 + at) as u32 as f32) + V::ramp());
+        let columns = Columns::<V>::new(col0);
         let mut live = state.reset(cols, rows);
         // Gaussians at or in front of this depth blend at no pixel of the tile (layers behind)
         let mut in_front = f32::NEG_INFINITY;
@@ -381,7 +380,7 @@ fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
     state: &mut TileState,
     g: &Splat2D,
     id: u32,
-    columns: &[V; TILE],
+    columns: &Columns<V>,
     col0: usize,
     row0: usize,
 ) -> usize {
@@ -394,7 +393,44 @@ fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
         return 0;
     }
     let box_bits = (1u32 << x_end) - (1u32 << x_start);
-    let group_bits = (1u32 << V::N) - 1;
+    let s = V::splat;
+    const LOG2_E: f32 = std::f32::consts::LOG2_E;
+    let [ca, cb, cc] = g.conic;
+    let (qb, qc) = (-LOG2_E * cb, -0.5 * LOG2_E * cc);
+    let lanes = GaussianLanes {
+        qa: s(-0.5 * LOG2_E * ca),
+        mean_x: s(g.mean[0]),
+        color: g.color.map(s),
+        z: s(g.depth),
+        id: V::splat_bits(id),
+    };
+    // the row's terms of the exponent: q = dx (qa dx + qb dy) + (qc dy² + log2 o)
+    let row_terms = |y: usize| {
+        let dy = g.mean[1] - (row0 + y) as u32 as f32;
+        (qb * dy, qc * dy * dy + g.log2_opacity)
+    };
+    let live_bits = |state: &TileState, y: usize, at: usize, width: usize| {
+        ((box_bits & u32::from(state.live[y])) >> at) & ((1u32 << width) - 1)
+    };
+    let half = V::N / 2;
+    let mut stopped = 0;
+    let mut y = y_start;
+    if x_end - x_start <= half {
+        // A box at most half the lanes wide (most are about three pixels): two of its rows in one
+        // vector, half the chains (see `blend_window`) of one row each.
+        let at = x_start.min(TILE - half);
+        while y + 1 < y_end {
+            let bits = live_bits(state, y, at, half) | live_bits(state, y + 1, at, half) << half;
+            if bits != 0 {
+                let ((dy0, row0_term), (dy1, row1_term)) = (row_terms(y), row_terms(y + 1));
+                let (q_dy, q_row) = (V::halves(dy0, dy1), V::halves(row0_term, row1_term));
+                let window = TwoRows { y, at };
+                let dx = lanes.mean_x - columns.pairs[at];
+                stopped += blend_window::<COLOR, SOLID, V, _>(state, window, bits, dx, q_dy, q_row, &lanes);
+            }
+            y += 2;
+        }
+    }
     // The windows of `V::N` columns a row of the box needs: where the box is at most `V::N` wide
     // (most are), one that slides to its first column, instead of two aligned groups where it
     // straddles their boundary (fewer groups and loop branches); else the aligned groups.
@@ -404,68 +440,184 @@ fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
         let first = x_start / V::N * V::N;
         (first, (x_end - first).div_ceil(V::N))
     };
-    let s = V::splat;
-    const LOG2_E: f32 = std::f32::consts::LOG2_E;
-    let [ca, cb, cc] = g.conic;
-    let (qa, qb, qc) = (s(-0.5 * LOG2_E * ca), -LOG2_E * cb, -0.5 * LOG2_E * cc);
-    let mean_x = s(g.mean[0]);
-    let [red, green, blue] = g.color.map(s);
-    let (z, id_lanes) = (s(g.depth), V::splat_bits(id));
-    let mut stopped = 0;
-    for y in y_start..y_end {
-        let row_bits = box_bits & u32::from(state.live[y]);
-        if row_bits == 0 {
+    for y in y..y_end {
+        if box_bits & u32::from(state.live[y]) == 0 {
             continue;
         }
-        let dy = g.mean[1] - (row0 + y) as u32 as f32;
-        let (q_dy, q_row) = (s(qb * dy), s(qc * dy * dy + g.log2_opacity));
+        let (q_dy, q_row) = row_terms(y);
         for w in 0..windows {
             let at = first + w * V::N;
-            let bits = (row_bits >> at) & group_bits;
-            if bits == 0 {
-                continue;
-            }
-            // Pixel x is sampled at x (INRIA coordinates, mean already shifted by -0.5).
-            let dx = mean_x - columns[at];
-            let q = dx * (qa * dx + q_dy) + q_row;
-            let lanes = V::Mask::from_bits(bits);
-            if lanes.and(q.ge(s(Q_FLOOR))).bits() == 0 {
-                continue; // every lane would get alpha < 1/255: skipped, T untouched
-            }
-            let alpha = q.exp2().min(s(ALPHA_MAX));
-            let mut valid = lanes.and(alpha.ge(s(ALPHA_MIN)));
-            if SOLID {
-                valid = valid.and(z.gt(V::load(&state.near[y], at)));
-            }
-            let t = V::load(&state.transmittance[y], at);
-            let test_t = t * (s(1.0) - alpha);
-            let stop = valid.and(test_t.lt(s(T_MIN)));
-            let blended = valid.and_not(stop);
-            let weight = blended.keep(alpha * t);
-            let new_t = blended.select(test_t, t);
-            new_t.store(&mut state.transmittance[y], at);
-            let max_weight = V::load(&state.max_weight[y], at);
-            let better = weight.gt(max_weight);
-            let new_max = better.select(weight, max_weight);
-            new_max.store(&mut state.max_weight[y], at);
-            better.select(id_lanes, V::load_bits(&state.max_id[y], at)).store_bits(&mut state.max_id[y], at);
-            let mut stop_bits = stop.bits();
-            if SOLID {
-                let decided = lanes.and((s(ALPHA_MAX) * new_t).le(new_max)).and((s(1.0) - new_t).ge(s(0.5)));
-                stop_bits |= decided.bits();
-            }
-            if stop_bits != 0 {
-                state.live[y] &= !((stop_bits << at) as u16);
-                stopped += stop_bits.count_ones() as usize;
-            }
-            if COLOR {
-                let add = |acc: &mut Row, value: V| (V::load(acc, at) + value * weight).store(acc, at);
-                add(&mut state.red[y], red);
-                add(&mut state.green[y], green);
-                add(&mut state.blue[y], blue);
-                add(&mut state.depth[y], z);
+            let bits = live_bits(state, y, at, V::N);
+            if bits != 0 {
+                let dx = lanes.mean_x - columns.rows[at];
+                let window = OneRow { y, at };
+                stopped += blend_window::<COLOR, SOLID, V, _>(state, window, bits, dx, s(q_dy), s(q_row), &lanes);
             }
         }
     }
     stopped
+}
+
+/// Per tile, the x of the pixels of the window at each column: one row's (`rows`) and two rows'
+/// (`pairs`: half the lanes each).
+struct Columns<V> {
+    rows: [V; TILE],
+    pairs: [V; TILE],
+}
+
+impl<V: Lanes> Columns<V> {
+    fn new(col0: usize) -> Self {
+        let half = V::N / 2;
+        let pair_ramp = V::halves(0.0, 0.0) + V::ramp() - V::halves(0.0, half as f32);
+        let x = |at: usize| V::splat((col0 + at) as u32 as f32);
+        Self { rows: std::array::from_fn(|at| x(at) + V::ramp()), pairs: std::array::from_fn(|at| x(at) + pair_ramp) }
+    }
+}
+
+/// One Gaussian's values in every lane.
+struct GaussianLanes<V> {
+    qa: V,
+    mean_x: V,
+    color: [V; 3],
+    z: V,
+    id: V,
+}
+
+/// Where a vector's lanes lie in the tile: `V::N` columns of one row from `at`, or `V::N / 2`
+/// columns of two rows.
+trait Window: Copy {
+    fn load<V: Lanes>(self, rows: &[Row; TILE]) -> V;
+    fn store<V: Lanes>(self, value: V, rows: &mut [Row; TILE]);
+    fn load_bits<V: Lanes>(self, rows: &[[u32; TILE]; TILE]) -> V;
+    fn store_bits<V: Lanes>(self, value: V, rows: &mut [[u32; TILE]; TILE]);
+    /// Clears the live bits of the pixels of the lanes set in `lanes`.
+    fn stop<V: Lanes>(self, live: &mut [u16; TILE], lanes: u32);
+}
+
+#[derive(Clone, Copy)]
+struct OneRow {
+    y: usize,
+    at: usize,
+}
+
+impl Window for OneRow {
+    #[inline(always)]
+    fn load<V: Lanes>(self, rows: &[Row; TILE]) -> V {
+        V::load(&rows[self.y], self.at)
+    }
+    #[inline(always)]
+    fn store<V: Lanes>(self, value: V, rows: &mut [Row; TILE]) {
+        value.store(&mut rows[self.y], self.at);
+    }
+    #[inline(always)]
+    fn load_bits<V: Lanes>(self, rows: &[[u32; TILE]; TILE]) -> V {
+        V::load_bits(&rows[self.y], self.at)
+    }
+    #[inline(always)]
+    fn store_bits<V: Lanes>(self, value: V, rows: &mut [[u32; TILE]; TILE]) {
+        value.store_bits(&mut rows[self.y], self.at);
+    }
+    #[inline(always)]
+    fn stop<V: Lanes>(self, live: &mut [u16; TILE], lanes: u32) {
+        live[self.y] &= !((lanes << self.at) as u16);
+    }
+}
+
+/// Rows `y` and `y + 1` (`y + 1 < TILE`).
+#[derive(Clone, Copy)]
+struct TwoRows {
+    y: usize,
+    at: usize,
+}
+
+impl TwoRows {
+    fn split<T>(self, rows: &mut [T; TILE]) -> (&mut T, &mut T) {
+        let (first, rest) = rows.split_at_mut(self.y + 1);
+        (&mut first[self.y], &mut rest[0])
+    }
+}
+
+impl Window for TwoRows {
+    #[inline(always)]
+    fn load<V: Lanes>(self, rows: &[Row; TILE]) -> V {
+        V::load_pair(&rows[self.y], &rows[self.y + 1], self.at)
+    }
+    #[inline(always)]
+    fn store<V: Lanes>(self, value: V, rows: &mut [Row; TILE]) {
+        let (first, second) = self.split(rows);
+        value.store_pair(first, second, self.at);
+    }
+    #[inline(always)]
+    fn load_bits<V: Lanes>(self, rows: &[[u32; TILE]; TILE]) -> V {
+        V::load_pair_bits(&rows[self.y], &rows[self.y + 1], self.at)
+    }
+    #[inline(always)]
+    fn store_bits<V: Lanes>(self, value: V, rows: &mut [[u32; TILE]; TILE]) {
+        let (first, second) = self.split(rows);
+        value.store_pair_bits(first, second, self.at);
+    }
+    #[inline(always)]
+    fn stop<V: Lanes>(self, live: &mut [u16; TILE], lanes: u32) {
+        let half = V::N / 2;
+        live[self.y] &= !(((lanes & ((1 << half) - 1)) << self.at) as u16);
+        live[self.y + 1] &= !(((lanes >> half) << self.at) as u16);
+    }
+}
+
+/// Blends one Gaussian over the pixels of `window` whose lanes are set in `bits`, with `dx` their
+/// offsets from its mean and `q_dy`, `q_row` their rows' terms of the exponent; returns how many
+/// pixels it stopped. Each lane's operations are those of `blend`'s description, whatever window
+/// holds it.
+#[inline(always)]
+fn blend_window<const COLOR: bool, const SOLID: bool, V: Lanes, W: Window>(
+    state: &mut TileState,
+    window: W,
+    bits: u32,
+    dx: V,
+    q_dy: V,
+    q_row: V,
+    g: &GaussianLanes<V>,
+) -> usize {
+    let s = V::splat;
+    let q = dx * (g.qa * dx + q_dy) + q_row;
+    let lanes = V::Mask::from_bits(bits);
+    if lanes.and(q.ge(s(Q_FLOOR))).bits() == 0 {
+        return 0; // every lane would get alpha < 1/255: skipped, T untouched
+    }
+    let alpha = q.exp2().min(s(ALPHA_MAX));
+    let mut valid = lanes.and(alpha.ge(s(ALPHA_MIN)));
+    if SOLID {
+        valid = valid.and(g.z.gt(window.load(&state.near)));
+    }
+    let t: V = window.load(&state.transmittance);
+    let test_t = t * (s(1.0) - alpha);
+    let stop = valid.and(test_t.lt(s(T_MIN)));
+    let blended = valid.and_not(stop);
+    let weight = blended.keep(alpha * t);
+    let new_t = blended.select(test_t, t);
+    window.store(new_t, &mut state.transmittance);
+    let max_weight: V = window.load(&state.max_weight);
+    let better = weight.gt(max_weight);
+    let new_max = better.select(weight, max_weight);
+    window.store(new_max, &mut state.max_weight);
+    window.store_bits(better.select(g.id, window.load_bits(&state.max_id)), &mut state.max_id);
+    let mut stop_bits = stop.bits();
+    if SOLID {
+        let decided = lanes.and((s(ALPHA_MAX) * new_t).le(new_max)).and((s(1.0) - new_t).ge(s(0.5)));
+        stop_bits |= decided.bits();
+    }
+    if stop_bits != 0 {
+        window.stop::<V>(&mut state.live, stop_bits);
+    }
+    if COLOR {
+        let add = |acc: &mut [Row; TILE], value: V| {
+            let sum = window.load::<V>(acc) + value * weight;
+            window.store(sum, acc);
+        };
+        add(&mut state.red, g.color[0]);
+        add(&mut state.green, g.color[1]);
+        add(&mut state.blue, g.color[2]);
+        add(&mut state.depth, g.z);
+    }
+    stop_bits.count_ones() as usize
 }

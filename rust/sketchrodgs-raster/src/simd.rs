@@ -48,6 +48,14 @@ pub trait Lanes: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = S
     fn load_bits(row: &[u32; 16], at: usize) -> Self;
     fn store_bits(self, row: &mut [u32; 16], at: usize);
     fn splat_bits(v: u32) -> Self;
+    /// Elements `at .. at + N / 2` of `first` in the low half of the lanes, of `second` in the
+    /// high half (two rows of a narrow footprint in one vector).
+    fn load_pair(first: &[f32; 16], second: &[f32; 16], at: usize) -> Self;
+    fn store_pair(self, first: &mut [f32; 16], second: &mut [f32; 16], at: usize);
+    fn load_pair_bits(first: &[u32; 16], second: &[u32; 16], at: usize) -> Self;
+    fn store_pair_bits(self, first: &mut [u32; 16], second: &mut [u32; 16], at: usize);
+    /// `low` in the low half of the lanes, `high` in the high half.
+    fn halves(low: f32, high: f32) -> Self;
     /// Lane-wise minimum; `other` where `self` is NaN (`minps`).
     fn min(self, other: Self) -> Self;
     /// Lane-wise maximum; `other` where `self` is NaN (`maxps`).
@@ -98,6 +106,29 @@ fn put_window<const N: usize, T: Copy>(row: &mut [T; 16], at: usize, values: [T;
     if let Some(w) = row.get_mut(at..at + N) {
         w.copy_from_slice(&values);
     }
+}
+
+/// `window(first, at)` of half the lanes, then `window(second, at)`.
+#[inline(always)]
+fn pair_window<const N: usize, const H: usize, T: Copy + bytemuck::Zeroable>(
+    first: &[T; 16],
+    second: &[T; 16],
+    at: usize,
+) -> [T; N] {
+    let (low, high) = (window::<H, T>(first, at), window::<H, T>(second, at));
+    std::array::from_fn(|i| if i < H { low[i] } else { high[i - H] })
+}
+
+/// Writes the low half of `values` as `put_window(first, at)`, the high half into `second`.
+#[inline(always)]
+fn put_pair_window<const N: usize, const H: usize, T: Copy + bytemuck::Zeroable>(
+    first: &mut [T; 16],
+    second: &mut [T; 16],
+    at: usize,
+    values: [T; N],
+) {
+    put_window::<H, T>(first, at, std::array::from_fn(|i| values[i]));
+    put_window::<H, T>(second, at, std::array::from_fn(|i| values[H + i]));
 }
 
 /// A per-lane mask of a [`Lanes`] (all bits of a lane set or clear).
@@ -338,6 +369,26 @@ impl Lanes for F32x4 {
         Self(imp::from_bits([v; 4]))
     }
     #[inline(always)]
+    fn load_pair(first: &[f32; 16], second: &[f32; 16], at: usize) -> Self {
+        Self(imp::from_array(pair_window::<4, 2, f32>(first, second, at)))
+    }
+    #[inline(always)]
+    fn store_pair(self, first: &mut [f32; 16], second: &mut [f32; 16], at: usize) {
+        put_pair_window::<4, 2, f32>(first, second, at, imp::to_array(self.0));
+    }
+    #[inline(always)]
+    fn load_pair_bits(first: &[u32; 16], second: &[u32; 16], at: usize) -> Self {
+        Self(imp::from_bits(pair_window::<4, 2, u32>(first, second, at)))
+    }
+    #[inline(always)]
+    fn store_pair_bits(self, first: &mut [u32; 16], second: &mut [u32; 16], at: usize) {
+        put_pair_window::<4, 2, u32>(first, second, at, imp::to_bits(self.0));
+    }
+    #[inline(always)]
+    fn halves(low: f32, high: f32) -> Self {
+        Self(imp::from_array([low, low, high, high]))
+    }
+    #[inline(always)]
     fn min(self, other: Self) -> Self {
         Self(imp::min(self.0, other.0))
     }
@@ -454,7 +505,7 @@ mod avx2 {
     };
     use std::ops::{Add, Mul, Sub};
 
-    use super::{LaneMask, Lanes, put_window, window};
+    use super::{LaneMask, Lanes, pair_window, put_pair_window, put_window, window};
 
     /// Eight f32 lanes.
     #[derive(Clone, Copy, Debug)]
@@ -494,6 +545,26 @@ mod avx2 {
         #[inline(always)]
         fn splat_bits(v: u32) -> Self {
             Self(unsafe { _mm256_castsi256_ps(_mm256_set1_epi32(v as i32)) })
+        }
+        #[inline(always)]
+        fn load_pair(first: &[f32; 16], second: &[f32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(pair_window::<8, 4, f32>(first, second, at)))
+        }
+        #[inline(always)]
+        fn store_pair(self, first: &mut [f32; 16], second: &mut [f32; 16], at: usize) {
+            put_pair_window::<8, 4, f32>(first, second, at, bytemuck::cast(self.0));
+        }
+        #[inline(always)]
+        fn load_pair_bits(first: &[u32; 16], second: &[u32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(pair_window::<8, 4, u32>(first, second, at)))
+        }
+        #[inline(always)]
+        fn store_pair_bits(self, first: &mut [u32; 16], second: &mut [u32; 16], at: usize) {
+            put_pair_window::<8, 4, u32>(first, second, at, bytemuck::cast(self.0));
+        }
+        #[inline(always)]
+        fn halves(low: f32, high: f32) -> Self {
+            Self(bytemuck::cast([low, low, low, low, high, high, high, high]))
         }
         #[inline(always)]
         fn min(self, other: Self) -> Self {
