@@ -425,26 +425,29 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
         let u = cam.fx * x * inv_z + cam.cx - 0.5;
         let v = cam.fy * y * inv_z + cam.cy - 0.5;
         ok &= u.abs() <= f32::MAX && v.abs() <= f32::MAX && radius <= f32::MAX;
-        let tiles = tile_rect_of(u, v, radius, (grid_x as usize, grid_y as usize));
 
         // Pixels where opacity * exp(-q/2) >= 1/255 satisfy q <= tau; on that ellipse |dx| reaches
         // sqrt(tau Σxx). The margin keeps rounding from dropping a boundary pixel.
         let tau = 2.0 * ln_at_least_one(opacity[l] / ALPHA_MIN);
         let reach = |var: f32| (tau * var).sqrt() * (1.0 + 1e-3) + 0.05;
-        // Inclusive pixel range [ceil(m - r), floor(m + r)] clipped to [0, side - 1].
-        let span =
-            |m: f32, r: f32, side: u32| (ceil(m - r).max(0.0) as i32, floor(m + r).min((side - 1) as f32) as i32);
+        // Inclusive pixel range [ceil(m - r), floor(m + r)] clipped to [0, side - 1]. Everything
+        // from here on stays in f32 (whole numbers, exact): a conversion to an integer per lane
+        // kept the compiler from vectorising the loop.
+        let span = |m: f32, r: f32, side: u32| (ceil(m - r).max(0.0), floor(m + r).min((side - 1) as f32));
         let (bx0, bx1) = span(u, reach(a), width);
         let (by0, by1) = span(v, reach(c), height);
         ok &= bx0 <= bx1 && by0 <= by1;
-        let pixels = [bx0.max(0) as u16, by0.max(0) as u16, bx1.max(0) as u16, by1.max(0) as u16];
-        // Tiles holding no pixel of the box would only skip this Gaussian: leave them out.
-        let tile = TILE_SIZE as u16;
+        let pixels = [bx0, by0, bx1.max(0.0), by1.max(0.0)];
+        // INRIA getRect (`tile_rect_of`): truncated, clamped to the grid; less the tiles holding
+        // no pixel of the box, which would only skip this Gaussian.
+        let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
+        let last = (TILE_SIZE - 1) as f32;
+        let grid = |t: f32, max: usize| floor(t.max(0.0).min(max as f32));
         let clipped = [
-            tiles.x0.max(pixels[0] / tile),
-            tiles.y0.max(pixels[1] / tile),
-            tiles.x1.min(pixels[2] / tile + 1),
-            tiles.y1.min(pixels[3] / tile + 1),
+            grid((u - radius) * tile_scale, grid_x as usize).max(floor(pixels[0] * tile_scale)),
+            grid((v - radius) * tile_scale, grid_y as usize).max(floor(pixels[1] * tile_scale)),
+            grid((u + radius + last) * tile_scale, grid_x as usize).min(floor(pixels[2] * tile_scale) + 1.0),
+            grid((v + radius + last) * tile_scale, grid_y as usize).min(floor(pixels[3] * tile_scale) + 1.0),
         ];
         ok &= clipped[0] < clipped[2] && clipped[1] < clipped[3];
 
@@ -453,8 +456,8 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
         // ln(opacity) = tau / 2 + ln(1/255), from the ln just taken
         log2_opacity[l] = (0.5 * tau + LN_ALPHA_MIN) * std::f32::consts::LOG2_E;
         for k in 0..4 {
-            pixel_box[k][l] = pixels[k];
-            rect[k][l] = clipped[k];
+            pixel_box[k][l] = whole(pixels[k]);
+            rect[k][l] = whole(clipped[k]);
         }
     }
     std::array::from_fn(|l| {
@@ -489,24 +492,37 @@ fn ln_at_least_one(x: f32) -> f32 {
 }
 
 /// Pixel coordinates are clamped to ±this before rounding: far beyond any image, and small
-/// enough for the i32 round trip below.
-const FAR: f32 = 1e9;
+/// enough for rounding by adding `ROUND` below.
+const FAR: f32 = 4_194_304.0; // 2^22
+/// Adding 1.5 * 2^23 to a number of magnitude at most 2^22 rounds it to a whole number.
+const ROUND: f32 = 12_582_912.0;
 
-/// `ceil` without a libm call (SSE2 has no rounding instruction); exact for |x| <= FAR, and
-/// only ever used where the result is then clipped to the image.
+/// `ceil` without a libm call (SSE2 has no rounding instruction) or a conversion to an integer;
+/// exact for |x| <= FAR, and only ever used where the result is then clipped to the image. A NaN
+/// gives -FAR (`max` drops it), so the result is always finite.
 #[inline(always)]
+#[allow(clippy::manual_clamp)] // `clamp` keeps a NaN, and `whole` must never see one
 fn ceil(x: f32) -> f32 {
-    let x = x.clamp(-FAR, FAR);
-    let t = x as i32 as f32; // toward zero
-    if t < x { t + 1.0 } else { t }
+    let x = x.max(-FAR).min(FAR);
+    let r = (x + ROUND) - ROUND;
+    if r < x { r + 1.0 } else { r }
 }
 
-/// `floor` without a libm call; exact for |x| <= FAR.
+/// `floor` without a libm call or a conversion; exact for |x| <= FAR.
 #[inline(always)]
+#[allow(clippy::manual_clamp)] // as in `ceil`
 fn floor(x: f32) -> f32 {
-    let x = x.clamp(-FAR, FAR);
-    let t = x as i32 as f32;
-    if t > x { t - 1.0 } else { t }
+    let x = x.max(-FAR).min(FAR);
+    let r = (x + ROUND) - ROUND;
+    if r > x { r - 1.0 } else { r }
+}
+
+/// A whole number in [0, 2^16) as u16 (outside it, of a culled Gaussian, any value).
+#[inline(always)]
+fn whole(x: f32) -> u16 {
+    // SAFETY: `x` comes from `ceil`/`floor` (so it is finite, with |x| <= FAR < 2^31), after
+    // which i32 -> u16 only drops bits.
+    unsafe { x.to_int_unchecked::<i32>() as u16 }
 }
 
 /// Rotation matrix of `[w, x, y, z]`, normalised by `max(|q|, 1e-12)` as the reference does.
