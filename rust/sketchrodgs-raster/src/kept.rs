@@ -46,6 +46,7 @@ impl<T> Kept<T> {
 
 pub(crate) static SPLATS: Kept<Splat2D> = Kept::new();
 pub(crate) static RECTS: Kept<TileRect> = Kept::new();
+pub(crate) static DEPTHS: Kept<f32> = Kept::new();
 pub(crate) static SORT_KEYS: Kept<u64> = Kept::new();
 pub(crate) static SORT_SCRATCH: Kept<u64> = Kept::new();
 
@@ -53,6 +54,7 @@ pub(crate) static SORT_SCRATCH: Kept<u64> = Kept::new();
 pub fn release_kept_buffers() {
     SPLATS.release();
     RECTS.release();
+    DEPTHS.release();
     SORT_KEYS.release();
     SORT_SCRATCH.release();
 }
