@@ -37,6 +37,8 @@ pub trait Source: Sync {
     fn splat(&self, k: u32) -> Splat2D;
     /// The scene row of entry `k`.
     fn row(&self, k: u32) -> u32;
+    /// Asks the CPU to bring entry `k`'s projection into cache (a hint; nothing where unsupported).
+    fn prefetch(&self, _k: u32) {}
 }
 
 /// The Gaussians of one render: projected, and binned into tiles.
@@ -58,6 +60,26 @@ impl Source for Binned<'_> {
     #[inline]
     fn row(&self, k: u32) -> u32 {
         self.projected.id(k as usize)
+    }
+
+    #[inline]
+    fn prefetch(&self, k: u32) {
+        prefetch_splat(&self.projected.splats, k);
+    }
+}
+
+/// Prefetches the cache lines `splats[k]` lies on (nothing where `k` is out of range).
+#[inline(always)]
+pub(crate) fn prefetch_splat(splats: &[Splat2D], k: u32) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(splat) = splats.get(k as usize) {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let first = std::ptr::from_ref(splat).cast::<i8>();
+        // SAFETY: prefetching is a hint that never faults, and both addresses lie inside `splat`.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(first);
+            _mm_prefetch::<_MM_HINT_T0>(first.add(std::mem::size_of::<Splat2D>() - 1));
+        }
     }
 }
 
@@ -211,8 +233,8 @@ fn split_bands<T>(buf: &mut [T], len: usize, n: usize) -> Vec<&mut [T]> {
     buf.chunks_mut(len.max(1)).collect()
 }
 
-/// Gaussians fetched ahead of blending, per tile.
-const BATCH: usize = 64;
+/// How many entries of a tile's list ahead of blending their splats are fetched into cache.
+const AHEAD: usize = 32;
 /// One tile row per accumulator row; SIMD groups are `V::N` consecutive pixels of it.
 type Row = [f32; TILE];
 
@@ -294,7 +316,6 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
     let rows = TILE.min(height - row0);
     let tile_y = row0 / TILE;
     let mut state = TileState::new();
-    let mut fetched = [Splat2D::default(); BATCH];
     for tile_x in 0..grid_x {
         let tile = tile_y * grid_x + tile_x;
         if mask.is_some_and(|m| !m.contains(tile)) {
@@ -309,21 +330,25 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
         if SOLID && let Some(near) = near {
             (live, in_front) = state.start_behind(near, width, col0, row0, cols, rows);
         }
+        // A tile's list comes as many short slices (one per binning chunk, about 16 entries at
+        // 2 M Gaussians), so the splats are fetched into cache `AHEAD` entries in front of the
+        // one blending, across the slices: they lie at random in memory.
+        let mut ahead = source.lists(tile).flatten();
+        for &id in ahead.by_ref().take(AHEAD) {
+            source.prefetch(id);
+        }
         'lists: for list in source.lists(tile) {
-            for batch in list.chunks(BATCH) {
-                // Copy the batch first: the loads are independent, so their cache misses overlap
-                // instead of stalling the blend loop one by one.
-                for (dst, &id) in fetched.iter_mut().zip(batch) {
-                    *dst = source.splat(id);
+            for &id in list {
+                if let Some(&next) = ahead.next() {
+                    source.prefetch(next);
                 }
-                for (g, &id) in fetched.iter().zip(batch) {
-                    if SOLID && g.depth <= in_front {
-                        continue;
-                    }
-                    live = live.saturating_sub(blend::<COLOR, SOLID, V>(&mut state, g, id, &columns, col0, row0));
-                    if live == 0 {
-                        break 'lists;
-                    }
+                let g = source.splat(id);
+                if SOLID && g.depth <= in_front {
+                    continue;
+                }
+                live = live.saturating_sub(blend::<COLOR, SOLID, V>(&mut state, &g, id, &columns, col0, row0));
+                if live == 0 {
+                    break 'lists;
                 }
             }
         }

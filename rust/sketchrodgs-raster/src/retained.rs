@@ -60,6 +60,12 @@ impl Source for Merged<'_> {
     fn row(&self, k: u32) -> u32 {
         if k >= MOVING { self.moving.id((k - MOVING) as usize) } else { self.statics.id(k as usize) }
     }
+
+    #[inline]
+    fn prefetch(&self, k: u32) {
+        let (p, i) = if k >= MOVING { (self.moving, k - MOVING) } else { (self.statics, k) };
+        crate::composite::prefetch_splat(&p.splats, i);
+    }
 }
 
 /// Moving Gaussians projected per rayon task each frame.
