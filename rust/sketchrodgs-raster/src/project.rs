@@ -35,7 +35,8 @@ pub struct Splat2D {
 }
 
 /// The projected Gaussians: `splats[k]` and `rects[k]` are Gaussian `ids[k]`, or Gaussian k when
-/// `ids` is None (then a culled Gaussian has an empty [`TileRect`] and a default [`Splat2D`]).
+/// `ids` is None (then a culled Gaussian has an empty [`TileRect`], and its [`Splat2D`] and sort
+/// depth are left over from an earlier render: sorting and compositing never read them).
 #[derive(Debug, Default)]
 pub struct Projected {
     pub ids: Option<Vec<u32>>,
@@ -148,10 +149,10 @@ fn project_all(splats: &Splats, cam: &CameraF32, camera: &Camera, with_color: bo
         .zip(depths.par_chunks_mut(MIN_GAUSSIANS_PER_TASK))
         .enumerate()
         .for_each(|(chunk, ((projected, rects), depths))| {
-            // a culled Gaussian keeps the default (whatever a last render left there is cleared)
-            projected.fill(Splat2D::default());
+            // A culled Gaussian gets an empty rectangle, so nothing reads its splat or depth:
+            // those keep whatever a last render left (writing defaults there cost a pass over
+            // 60 bytes a Gaussian).
             rects.fill(TileRect::default());
-            depths.fill(0.0);
             let start = chunk * MIN_GAUSSIANS_PER_TASK;
             let row = |k: usize| input(splats, start + k, with_color);
             project_each(projected.len(), row, cam, camera, |k, splat, rect| {
