@@ -493,7 +493,7 @@ struct Columns<V> {
 impl<V: Lanes> Columns<V> {
     fn new(col0: usize) -> Self {
         let half = V::N / 2;
-        let pair_ramp = V::halves(0.0, 0.0) + V::ramp() - V::halves(0.0, half as f32);
+        let pair_ramp = V::ramp() - V::halves(0.0, half as f32); // 0, 1, .., half - 1 twice
         let x = |at: usize| V::splat((col0 + at) as u32 as f32);
         Self { rows: std::array::from_fn(|at| x(at) + V::ramp()), pairs: std::array::from_fn(|at| x(at) + pair_ramp) }
     }

@@ -274,15 +274,25 @@ impl<'a> Reach<'a> {
 /// INRIA getRect: the tiles a footprint of `radius` px about (u, v) (INRIA pixel coordinates)
 /// overlaps; C truncation toward zero, then clamped to the grid.
 #[inline]
-fn tile_rect_of(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -> TileRect {
+fn tile_rect_of(u: f32, v: f32, radius: f32, grid: (usize, usize)) -> TileRect {
+    let [x0, y0, x1, y1] = tile_span(u, v, radius, grid).map(whole);
+    TileRect { x0, y0, x1, y1 }
+}
+
+/// [`tile_rect_of`] as whole numbers in f32 (a NaN gives 0), so that a loop over lanes of it
+/// vectorises: `[x0, y0, x1, y1]`.
+#[inline(always)]
+fn tile_span(u: f32, v: f32, radius: f32, (grid_x, grid_y): (usize, usize)) -> [f32; 4] {
     let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
-    let trunc_clamp = |t: f32, max: usize| (t as i32).clamp(0, max as i32) as u16;
-    TileRect {
-        x0: trunc_clamp((u - radius) * tile_scale, grid_x),
-        y0: trunc_clamp((v - radius) * tile_scale, grid_y),
-        x1: trunc_clamp((u + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_x),
-        y1: trunc_clamp((v + radius + (TILE_SIZE - 1) as f32) * tile_scale, grid_y),
-    }
+    let last = (TILE_SIZE - 1) as f32;
+    // for t >= 0 truncation is `floor`; `max` turns a NaN into 0, as C's cast to int did
+    let grid = |t: f32, max: usize| floor(t.max(0.0).min(max as f32));
+    [
+        grid((u - radius) * tile_scale, grid_x),
+        grid((v - radius) * tile_scale, grid_y),
+        grid((u + radius + last) * tile_scale, grid_x),
+        grid((v + radius + last) * tile_scale, grid_y),
+    ]
 }
 
 /// One Gaussian's inputs to [`project_each`]; `sh` (K*3 values) is None when no colour is wanted.
@@ -449,16 +459,15 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
         let (by0, by1) = span(v, reach(c), height);
         ok &= bx0 <= bx1 && by0 <= by1;
         let pixels = [bx0, by0, bx1.max(0.0), by1.max(0.0)];
-        // INRIA getRect (`tile_rect_of`): truncated, clamped to the grid; less the tiles holding
-        // no pixel of the box, which would only skip this Gaussian.
-        let tile_scale = 1.0 / TILE_SIZE as f32; // exact: a power of two
-        let last = (TILE_SIZE - 1) as f32;
-        let grid = |t: f32, max: usize| floor(t.max(0.0).min(max as f32));
+        // The tiles of the footprint (`tile_rect_of`), less those holding no pixel of the box,
+        // which would only skip this Gaussian.
+        let tiles = tile_span(u, v, radius, (grid_x as usize, grid_y as usize));
+        let first_tile = |p: f32| floor(p * (1.0 / TILE_SIZE as f32));
         let clipped = [
-            grid((u - radius) * tile_scale, grid_x as usize).max(floor(pixels[0] * tile_scale)),
-            grid((v - radius) * tile_scale, grid_y as usize).max(floor(pixels[1] * tile_scale)),
-            grid((u + radius + last) * tile_scale, grid_x as usize).min(floor(pixels[2] * tile_scale) + 1.0),
-            grid((v + radius + last) * tile_scale, grid_y as usize).min(floor(pixels[3] * tile_scale) + 1.0),
+            tiles[0].max(first_tile(pixels[0])),
+            tiles[1].max(first_tile(pixels[1])),
+            tiles[2].min(first_tile(pixels[2]) + 1.0),
+            tiles[3].min(first_tile(pixels[3]) + 1.0),
         ];
         ok &= clipped[0] < clipped[2] && clipped[1] < clipped[3];
 

@@ -45,6 +45,14 @@ struct Merged<'a> {
 /// Entries below this are static (index into `statics`); from it on, moving (`- MOVING`).
 const MOVING: u32 = 1 << 31;
 
+impl Merged<'_> {
+    /// The projection entry `k` is in, and its index there.
+    #[inline]
+    fn entry(&self, k: u32) -> (&Projected, u32) {
+        if k >= MOVING { (self.moving, k - MOVING) } else { (self.statics, k) }
+    }
+}
+
 impl Source for Merged<'_> {
     fn lists(&self, tile: usize) -> impl Iterator<Item = &[u32]> {
         self.lists.get(tile).map(|l| &l[..]).into_iter()
@@ -52,18 +60,19 @@ impl Source for Merged<'_> {
 
     #[inline]
     fn splat(&self, k: u32) -> Splat2D {
-        let (p, i) = if k >= MOVING { (self.moving, k - MOVING) } else { (self.statics, k) };
+        let (p, i) = self.entry(k);
         p.splats.get(i as usize).copied().unwrap_or_default()
     }
 
     #[inline]
     fn row(&self, k: u32) -> u32 {
-        if k >= MOVING { self.moving.id((k - MOVING) as usize) } else { self.statics.id(k as usize) }
+        let (p, i) = self.entry(k);
+        p.id(i as usize)
     }
 
     #[inline]
     fn prefetch(&self, k: u32) {
-        let (p, i) = if k >= MOVING { (self.moving, k - MOVING) } else { (self.statics, k) };
+        let (p, i) = self.entry(k);
         crate::composite::prefetch_splat(&p.splats, i);
     }
 }
