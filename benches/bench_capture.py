@@ -25,7 +25,7 @@ from sketchrodgs.extract import bindings_path, extract_rod
 from sketchrodgs.frames import FrameRenderer
 from sketchrodgs.images import FRAME_PNG_LEVEL, save_png, to_uint8
 from sketchrodgs.partial_render import MARGIN_PX, band_tiles
-from sketchrodgs.render import SOLID_OUTPUTS, render
+from sketchrodgs.render import COLOR_OUTPUTS, SOLID_OUTPUTS, render
 
 REPEAT = 5
 FRAMES = 6
@@ -117,7 +117,12 @@ def main() -> None:
     n = len(scene.means)
     rows = []
     for label, cam in (("960x540", camera), ("1920x1080", camera.resized(1920, 1080))):
-        for name, outputs in (("all", "all"), ("index", "index"), ("index and solid", SOLID_OUTPUTS)):
+        for name, outputs in (
+            ("all", "all"),
+            ("colour: rgb and alpha", COLOR_OUTPUTS),
+            ("index", "index"),
+            ("index and solid", SOLID_OUTPUTS),
+        ):
             seconds = best_time(lambda: render(scene, cam, outputs=outputs), repeat=3)
             rows.append([f"render {label} ({name})", f"{seconds * 1e3:.0f}"])
     tiles = band_tiles(camera, stroke, 0.01 * camera.width + MARGIN_PX)
@@ -144,12 +149,14 @@ def main() -> None:
         clock = time.perf_counter()
         count = 0
         for count, _frame in enumerate(animation.frames(pull, fps=30), start=1):
-            save_png(Path(tmp) / f"{count:04d}.png", render(animation.current_scene(), camera).rgb)
+            save_png(
+                Path(tmp) / f"{count:04d}.png", render(animation.current_scene(), camera, outputs=COLOR_OUTPUTS).rgb
+            )
         plain = (time.perf_counter() - clock) / max(count, 1)
         rows.append([f"animate frame, full render each frame ({count} frames)", f"{plain * 1e3:.0f}"])
         animation = Animation(scene, [rod])
         clock = time.perf_counter()
-        renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows)
+        renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows, outputs=COLOR_OUTPUTS)
         setup = time.perf_counter() - clock
         clock = time.perf_counter()
         stages = {"simulate": 0.0, "skin": 0.0, "render": 0.0, "png": 0.0}

@@ -11,7 +11,7 @@ from conftest import outputs_per_thread_count
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.errors import SketchRodGSError
 from sketchrodgs.frames import FrameRenderer
-from sketchrodgs.render import render
+from sketchrodgs.render import COLOR_OUTPUTS, render
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +39,12 @@ def test_every_frame_of_a_real_pull_equals_a_full_render(plant_animation):
     frame = index_only.render(animation.current_scene())
     assert frame.rgb is None
     np.testing.assert_array_equal(frame.index, render(animation.current_scene(), camera, outputs="index").index)
+    # colour only (what `sketchrodgs animate` writes): the same colour, no index image
+    colour_only = FrameRenderer(animation.rest_scene, camera, animation.moving_rows, outputs=COLOR_OUTPUTS)
+    got = colour_only.frame(animation.means, animation.scales, animation.quats)
+    want = render(animation.current_scene(), camera)
+    assert got.index is None and got.rgb is not None and want.rgb is not None
+    assert np.abs(got.rgb - want.rgb).max() <= 1e-6 and np.abs(got.alpha - want.alpha).max() <= 1e-6
 
 
 def test_bad_frames_are_refused(plant_animation):

@@ -17,7 +17,8 @@ import sketchrodgs
 from conftest import DATA, PLANT, random_scene
 from reference.raster_reference import render_reference
 from sketchrodgs import Camera, CameraError, GaussianScene, SketchRodGSError, _core
-from sketchrodgs.render import release_buffers, render
+from sketchrodgs.extract import extract_rod
+from sketchrodgs.render import COLOR_OUTPUTS, release_buffers, render, render_mode
 
 SH_C0 = 0.28209479177387814
 ALPHA_MIN = 1.0 / 255.0
@@ -356,6 +357,25 @@ def test_index_only_mode_gives_the_same_index_images():
         render(scene, cam, outputs=["colour"])
     with pytest.raises(SketchRodGSError, match="outputs"):
         render(scene, cam, outputs=[])
+
+
+def test_colour_only_mode_gives_the_same_colour_without_the_index():
+    scene = random_scene(2000, 3, seed=4)
+    cam = Camera.look_at((0.0, -1.0, -8.0), (0, 0, 0), width=120, height=90, fov_y_deg=45)  # 65 % covered
+    full = render(scene, cam, background=(0.2, 0.4, 0.6))
+    for outputs in ("rgb", ("rgb", "alpha"), COLOR_OUTPUTS):
+        colour = render(scene, cam, background=(0.2, 0.4, 0.6), outputs=outputs)
+        assert colour.index is None and colour.index_depth is None and colour.depth is None
+        np.testing.assert_array_equal(colour.rgb, full.rgb)  # the same bits
+        np.testing.assert_array_equal(colour.alpha, full.alpha)
+        np.testing.assert_array_equal(colour.covered(), full.index >= 0)
+        assert 0.1 < colour.covered().mean() < 0.9
+    with pytest.raises(SketchRodGSError, match="no index image"):
+        _ = colour.index_image
+    # a render that cannot give the sketch its index image is refused, saying so
+    with pytest.raises(SketchRodGSError, match="no index image"):
+        extract_rod(scene, cam, np.array([[30.0, 40.0], [90.0, 50.0]]), render=colour)
+    assert render_mode(["rgb", "depth"]) == "all" and render_mode(["alpha"]) == "index"
 
 
 def test_outputs_are_numpy_arrays_owned_by_rust():

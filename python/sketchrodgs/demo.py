@@ -16,7 +16,7 @@ from .extract import extract_rod
 from .frames import FrameRenderer
 from .images import FRAME_PNG_LEVEL, draw_overlay, save_png, to_uint8
 from .io import load_scene
-from .render import render
+from .render import COLOR_OUTPUTS, render
 from .video import write_video
 
 FPS = 30
@@ -80,7 +80,9 @@ def run_demo(out_dir: str | Path, sample: str = "plant", progress: Callable[[str
     animation = Animation(scene, [extraction])
     pull = demo_pull(extraction, camera)
     lap("build rod")
-    renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows, background=BACKGROUND)
+    renderer = FrameRenderer(
+        animation.rest_scene, camera, animation.moving_rows, background=BACKGROUND, outputs=COLOR_OUTPUTS
+    )
     lap("render frames")
     frames, furthest, pulled = [], -1.0, None
     count = int(round(pull.total * FPS))
@@ -145,14 +147,16 @@ def push_past_the_main_stem(out_dir: str | Path, progress: Callable[[str], Any] 
     offset = camera.screen_offset(polyline[grab], push["drag"])
     pull = Pull(grab, tuple(offset), duration=0.5, hold=0.3, release=True, settle=1.0)
     held = round((pull.duration + pull.hold) * FPS) - 1  # the last frame before the release
-    panels = [to_uint8(render(scene, shown, background=BACKGROUND).rgb_image)]
+    panels = [to_uint8(render(scene, shown, background=BACKGROUND, outputs=COLOR_OUTPUTS).rgb_image)]
     frames: list[np.ndarray] = []
     field = None
     closest: dict[bool, float] = {}
     for contact in (True, False):
         animation = Animation(scene, [extraction], clamp=push["clamp"], contact=contact)
         field = animation.field if contact else field
-        renderer = FrameRenderer(animation.rest_scene, shown, animation.moving_rows, background=BACKGROUND)
+        renderer = FrameRenderer(
+            animation.rest_scene, shown, animation.moving_rows, background=BACKGROUND, outputs=COLOR_OUTPUTS
+        )
         for frame in animation.frames(pull, FPS):
             if contact or frame.index == held:
                 rgb = to_uint8(renderer.frame(animation.means, animation.scales, animation.quats).rgb_image)

@@ -310,8 +310,9 @@ def extract_rod(
     ):
         raise SketchRodGSError(f"smoothing: must be a number of radii in 0..{MAX_SMOOTHING:g}, got {smoothing!r}")
 
-    if render is not None and render.index.shape != (camera.height, camera.width):
-        raise SketchRodGSError(f"render: index image is {render.index.shape}, camera is {camera.height}x{camera.width}")
+    if render is not None and render.index_image.shape != (camera.height, camera.width):
+        shape = render.index_image.shape
+        raise SketchRodGSError(f"render: index image is {shape}, camera is {camera.height}x{camera.width}")
     given = render is not None
     # The band's tiles (unless the render was given), and where the search asks for them, the
     # layers behind them.
@@ -540,8 +541,8 @@ def _search_inputs(
     whether it was flipped.
     The search always starts at the stroke end that comes first in (x, y) order, so the result
     does not depend on the direction the stroke was drawn."""
-    index = np.ascontiguousarray(render.index, np.int32)
-    depth = np.ascontiguousarray(render.index_depth, np.float32)
+    index = np.ascontiguousarray(render.index_image, np.int32)
+    depth = np.ascontiguousarray(render.index_depth_image, np.float32)
     opacity = np.ascontiguousarray(render.is_solid(), np.float32)
     flip = _flipped(stroke)
     work = np.ascontiguousarray(stroke[::-1] if flip else stroke, np.float32)

@@ -86,7 +86,7 @@ class PartialRender:
 
     def _behind(self, front: RenderResult, count: int, tiles: np.ndarray) -> list[RenderResult]:
         step = np.float32(1.0 + GAP_PX / self.camera.fx)
-        near = np.where(front.index >= 0, front.index_depth * step, np.float32(np.inf)).astype(np.float32)
+        near = np.where(front.index_image >= 0, front.index_depth_image * step, np.float32(np.inf)).astype(np.float32)
         return render_behind(self.scene, self.camera, near, count, gap_px=GAP_PX, tiles=tiles)
 
     def missed(self) -> np.ndarray:
@@ -118,8 +118,8 @@ class PartialRender:
         if not self.behind:
             return None
         if self._stacked is None or self._stacked[0] is not self.behind:
-            index = np.stack([layer.index for layer in self.behind]).astype(np.int32, copy=False)
-            depth = np.stack([layer.index_depth for layer in self.behind]).astype(np.float32, copy=False)
+            index = np.stack([layer.index_image for layer in self.behind]).astype(np.int32, copy=False)
+            depth = np.stack([layer.index_depth_image for layer in self.behind]).astype(np.float32, copy=False)
             solid = np.stack([layer.is_solid() for layer in self.behind]).astype(np.float32)
             self._stacked = (self.behind, (index, depth, solid))
         return self._stacked[1]

@@ -308,8 +308,8 @@ def visible_share(scene_render: RenderResult, camera: Camera, polyline: np.ndarr
     inside = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
     col = np.clip(uv[:, 0].astype(int), 0, camera.width - 1)
     row = np.clip(uv[:, 1].astype(int), 0, camera.height - 1)
-    seen = scene_render.index_depth[row, col]
-    on = scene_render.index[row, col] >= 0
+    seen = scene_render.index_depth_image[row, col]
+    on = scene_render.index_image[row, col] >= 0
     return float(np.mean(inside & on & (seen > z - 3 * radius) & (seen < z + 1.5 * radius)))
 
 

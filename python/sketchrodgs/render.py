@@ -28,6 +28,9 @@ OUTPUT_NAMES = ("rgb", "alpha", "depth", "index", "index_depth", "solid")
 # pixel once its index is decided and its alpha reached 0.5 (docs/rendering.md, "Index and solid only").
 INDEX_OUTPUTS = frozenset({"index", "index_depth", "alpha", "solid"})
 SOLID_OUTPUTS = frozenset({"index", "index_depth", "solid"})
+# Outputs a colour-only render gives: blending does not track each pixel's heaviest Gaussian
+# (docs/rendering.md, "Colour only"), what a picture or an animation frame needs.
+COLOR_OUTPUTS = frozenset({"rgb", "alpha"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,10 +42,11 @@ class RenderResult:
             exceed 1); None in index-only mode.
         alpha: (H, W) float32 accumulated opacity 1 - T_final (also in index-only mode).
         depth: (H, W) float32 expected camera z, sum(w_i z_i) / alpha (0 where nothing
-            contributes); None in index-only mode.
+            contributes); None in index-only and colour-only mode.
         index: (H, W) int32 row of the Gaussian with the largest alpha_i * T_i (ties go to the
-            front-most), -1 where no Gaussian contributes.
-        index_depth: (H, W) float32 camera z of that Gaussian (0 where index is -1).
+            front-most), -1 where no Gaussian contributes; None in colour-only mode.
+        index_depth: (H, W) float32 camera z of that Gaussian (0 where index is -1); None in
+            colour-only mode.
         solid: (H, W) bool, alpha >= 0.5: the pixel shows something at least half opaque (None in
             a result made by hand without it: `is_solid` then reads alpha).
         timings: seconds per stage: "project", "sort" (depth sort and tile binning), "composite".
@@ -53,8 +57,8 @@ class RenderResult:
     rgb: np.ndarray | None
     alpha: np.ndarray | None
     depth: np.ndarray | None
-    index: np.ndarray
-    index_depth: np.ndarray
+    index: np.ndarray | None
+    index_depth: np.ndarray | None
     solid: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)
     n_visible: int = 0
@@ -74,7 +78,14 @@ class RenderResult:
         every pixel a Gaussian covers."""
         if self.solid is not None:
             return self.solid
-        return self.alpha >= 0.5 if self.alpha is not None else self.index >= 0
+        return self.alpha >= 0.5 if self.alpha is not None else self.index_image >= 0
+
+    def covered(self) -> np.ndarray:
+        """(H, W) bool: the pixels some Gaussian contributes to (index >= 0, or where a render has
+        no index, alpha > 0: the same pixels)."""
+        if self.index is not None or self.alpha is None:
+            return np.asarray(self.index_image >= 0)
+        return np.asarray(self.alpha > 0)
 
     @property
     def rgb_image(self) -> np.ndarray:
@@ -82,6 +93,20 @@ class RenderResult:
         if self.rgb is None:
             raise SketchRodGSError("this render has no colour (it was made with outputs='index')")
         return self.rgb
+
+    @property
+    def index_image(self) -> np.ndarray:
+        """`index`, or an error where the render has none (made with `outputs=("rgb", "alpha")`)."""
+        if self.index is None:
+            raise SketchRodGSError("this render has no index image (it was made for colour only: outputs='all' has it)")
+        return self.index
+
+    @property
+    def index_depth_image(self) -> np.ndarray:
+        """`index_depth`, or an error where the render has no index image (as `index_image`)."""
+        if self.index_depth is None:
+            raise SketchRodGSError("this render has no index image (it was made for colour only: outputs='all' has it)")
+        return self.index_depth
 
 
 def render(
@@ -103,6 +128,8 @@ def render(
             no colour); or an iterable of names from OUTPUT_NAMES. Names all among `index`,
             `index_depth` and `solid` render cheaper still: each pixel stops once its index is
             decided and its alpha reached 0.5, the rest of alpha is not computed (`alpha` None).
+            Names among `rgb` and `alpha` render the colour without the index image (blending does
+            not track each pixel's heaviest Gaussian): the same rgb and alpha as "all", cheaper.
             Outputs not computed are None.
         tiles: (ceil(H / 16), ceil(W / 16)) bool, the tiles to render (`tile_grid`); each comes out
             exactly as in a full render, the others as background with index -1. Gaussians that
@@ -219,7 +246,7 @@ def _background(background: Iterable[float]) -> tuple[float, float, float]:
 
 
 def render_mode(outputs: str | Iterable[str]) -> str:
-    """The core's render mode for `outputs`: "all", "index" or "solid"."""
+    """The core's render mode for `outputs`: "all", "index", "solid" or "color"."""
     if outputs in ("all", "index"):
         return outputs  # type: ignore[return-value]
     names = {outputs} if isinstance(outputs, str) else set(outputs)
@@ -230,4 +257,6 @@ def render_mode(outputs: str | Iterable[str]) -> str:
         )
     if names <= SOLID_OUTPUTS:
         return "solid"
-    return "index" if names <= INDEX_OUTPUTS else "all"
+    if names <= INDEX_OUTPUTS:
+        return "index"
+    return "color" if names <= COLOR_OUTPUTS else "all"

@@ -166,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
     from ..frames import FrameRenderer
     from ..images import FRAME_PNG_LEVEL, save_png, to_uint8
     from ..io import load_scene, save_scene
+    from ..render import COLOR_OUTPUTS
     from ..rod import RodParams
     from ..scene_identity import check_rod_scene
     from ..video import VideoWriter
@@ -231,7 +232,7 @@ def run(args: argparse.Namespace) -> int:
         totals: dict[str, float] = {}
         count = int(round(pull.total * args.fps))
         # only the rods' Gaussians move: the rest is projected and binned once (docs/rendering.md)
-        renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows)
+        renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows, outputs=COLOR_OUTPUTS)
         with contextlib.ExitStack() as stack:
             # frames go to the video as they come: a long or large video is never held in memory
             video = stack.enter_context(VideoWriter(out / args.video, args.fps)) if args.video != "none" else None

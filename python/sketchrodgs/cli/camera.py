@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from ..images import save_image
     from ..io import load_scene
     from ..near_plane import why_nothing_is_visible
-    from ..render import render
+    from ..render import COLOR_OUTPUTS, render
     from ._framing import describe, framed_camera, scene_cameras
     from ._outputs import Outputs
 
@@ -50,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
         camera.save(camera_path)
         print(f"camera {describe(camera, up)} -> {args.output}")
         if preview_path is not None:
-            image = render(scene, camera)
+            image = render(scene, camera, outputs=COLOR_OUTPUTS)
             save_image(preview_path, image.rgb_image)
-            covered = float((image.index >= 0).mean())
+            covered = float(image.covered().mean())
             print(f"preview: {covered:.1%} of the pixels covered -> {args.preview}")
             if covered == 0:
                 print(f"sketchrodgs camera: warning: {why_nothing_is_visible(scene, camera)}", file=sys.stderr)

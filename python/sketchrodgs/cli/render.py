@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from ..images import save_image
     from ..io import load_scene
     from ..near_plane import render_near, why_nothing_is_visible
+    from ..render import COLOR_OUTPUTS
     from ._framing import camera_file, framed_camera, framing_given, scene_cameras
     from ._outputs import Outputs
 
@@ -88,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         if framed:
             camera, _ = framed_camera(args, scene, cameras)
         start = time.perf_counter()
-        outputs_wanted = "all" if args.output else "index"
+        # a picture alone needs no index image: colour only is cheaper (docs/rendering.md)
+        outputs_wanted = ("all" if args.index else COLOR_OUTPUTS) if args.output else "index"
         result = render_near(scene, camera, args.near, background=args.background, outputs=outputs_wanted)
         elapsed = time.perf_counter() - start
         if image_path is not None:
@@ -102,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
             with atomic_open(index_path) as stream:
                 stream.write(buffer.getvalue())
         outputs.commit()
-    covered = float((result.index >= 0).mean())
+    covered = float(result.covered().mean())
     print(
         f"rendered {len(scene):,} Gaussians ({result.n_visible:,} visible) at {camera.width}x{camera.height} "
         f"in {elapsed * 1e3:.1f} ms; {covered:.1%} of pixels covered"

@@ -21,8 +21,9 @@ fn raster_err(err: RasterError) -> PyErr {
 /// Arrays are float32 and C-contiguous: means (N, 3), scales (N, 3), quats (N, 4) wxyz,
 /// opacities (N,), sh (N, K, 3); world_to_camera is (4, 4) float64. Returns a `Rendered`: rgb
 /// (H, W, 3), alpha, depth, index (int32) and index_depth, each (H, W), the stage timings in
-/// seconds and the visible and pair counts. `mode` is "all"; "index" (rgb and depth None); or
-/// "solid" (as "index", with alpha exact only below 0.5: `RenderMode::IndexSolid`).
+/// seconds and the visible and pair counts. `mode` is "all"; "index" (rgb and depth None);
+/// "solid" (as "index", with alpha exact only below 0.5: `RenderMode::IndexSolid`); or "color"
+/// (rgb and alpha only, the rest None: `RenderMode::Color`).
 /// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
 /// `sh_rows` (N,) uint32: the row of `sh` (then (M, K, 3)) each Gaussian takes its SH from.
 /// `sort_offsets` (N, 3) float32: where each Gaussian sorts, from its mean in its own axes.
@@ -197,8 +198,11 @@ fn options_of(background: (f32, f32, f32), mode: &str) -> PyResult<RenderOptions
         "all" => RenderMode::Full,
         "index" => RenderMode::IndexOnly,
         "solid" => RenderMode::IndexSolid,
+        "color" => RenderMode::Color,
         other => {
-            return Err(SketchRodGSError::new_err(format!("mode: expected 'all', 'index' or 'solid', got {other:?}")));
+            return Err(SketchRodGSError::new_err(format!(
+                "mode: expected 'all', 'index', 'solid' or 'color', got {other:?}"
+            )));
         }
     };
     Ok(RenderOptions { background: [background.0, background.1, background.2], mode })
@@ -279,16 +283,16 @@ impl RetainedRender {
 /// arrays are the Rust buffers, moved into numpy without a copy.
 #[pyclass(module = "sketchrodgs._core", name = "Rendered", frozen, get_all)]
 pub struct Rendered {
-    /// (H, W, 3) colour, None in index-only mode.
+    /// (H, W, 3) colour, None in the index modes.
     rgb: Option<Py<PyArray3<f32>>>,
     /// (H, W) accumulated opacity.
     alpha: Py<PyArray2<f32>>,
-    /// (H, W) expected depth, None in index-only mode.
+    /// (H, W) expected depth, None in the index modes and in "color".
     depth: Option<Py<PyArray2<f32>>>,
-    /// (H, W) the index image K.
-    index: Py<PyArray2<i32>>,
-    /// (H, W) its depth Z.
-    index_depth: Py<PyArray2<f32>>,
+    /// (H, W) the index image K, None in "color".
+    index: Option<Py<PyArray2<i32>>>,
+    /// (H, W) its depth Z, None in "color".
+    index_depth: Option<Py<PyArray2<f32>>>,
     /// Seconds of the stages (project, sort and bin, composite).
     project_s: f64,
     sort_s: f64,
@@ -303,17 +307,21 @@ fn into_rendered(py: Python<'_>, out: RenderOutput) -> PyResult<Rendered> {
     let image2 = |v: Vec<f32>| -> PyResult<Py<PyArray2<f32>>> {
         Ok(Array2::from_shape_vec((h, w), v).map_err(shape_err)?.into_pyarray(py).unbind())
     };
-    let colour = !out.rgb.is_empty();
+    let some_image = |v: Vec<f32>| if v.is_empty() { Ok(None) } else { image2(v).map(Some) };
     Ok(Rendered {
-        rgb: if colour {
-            Some(Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py).unbind())
-        } else {
+        rgb: if out.rgb.is_empty() {
             None
+        } else {
+            Some(Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py).unbind())
         },
         alpha: image2(out.alpha)?,
-        depth: if colour { Some(image2(out.depth)?) } else { None },
-        index: Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py).unbind(),
-        index_depth: image2(out.index_depth)?,
+        depth: some_image(out.depth)?,
+        index: if out.index.is_empty() {
+            None
+        } else {
+            Some(Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py).unbind())
+        },
+        index_depth: some_image(out.index_depth)?,
         project_s: out.timings.project_s,
         sort_s: out.timings.sort_s,
         composite_s: out.timings.composite_s,

@@ -115,10 +115,11 @@ pub fn composite_behind<S: Source>(
 pub fn blank(camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, RasterError> {
     let (width, height) = (camera.width as usize, camera.height as usize);
     let pixels = width * height;
-    let with_color = options.mode == RenderMode::Full;
-    let colour = if with_color { pixels } else { 0 };
+    let colour = if options.mode.has_color() { pixels } else { 0 };
+    let depth = if options.mode == RenderMode::Full { pixels } else { 0 };
+    let index = if options.mode.has_index() { pixels } else { 0 };
     // reserve everything before touching any of it, and report what the whole image needs
-    let total = (4 * colour + 3 * pixels) * 4;
+    let total = (3 * colour + depth + 2 * index + pixels) * 4;
     let reserve = |len: usize| -> Result<(), RasterError> {
         let mut probe: Vec<f32> = Vec::new();
         probe.try_reserve_exact(len).map_err(|_| RasterError::OutOfMemory { what: "image", bytes: total })
@@ -132,10 +133,10 @@ pub fn blank(camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, R
         width,
         height,
         rgb,
-        alpha: try_filled(pixels, 0.0, "image")?, // transmittance is tracked in both modes, so alpha is free
-        depth: try_filled(colour, 0.0, "image")?,
-        index: try_filled(pixels, -1, "image")?,
-        index_depth: try_filled(pixels, 0.0, "image")?,
+        alpha: try_filled(pixels, 0.0, "image")?, // transmittance is tracked in every mode, so alpha is free
+        depth: try_filled(depth, 0.0, "image")?,
+        index: try_filled(index, -1, "image")?,
+        index_depth: try_filled(index, 0.0, "image")?,
         ..RenderOutput::default()
     })
 }
@@ -186,9 +187,10 @@ pub(crate) fn composite_with<S: Source>(
     let render = |band: Band| {
         let job = BandJob { width, height, grid_x, source, background: options.background, mask, near };
         match (simd, options.mode) {
-            (Simd::Four, RenderMode::Full) => render_band::<true, false, F32x4, S>(band, &job),
-            (Simd::Four, RenderMode::IndexOnly) => render_band::<false, false, F32x4, S>(band, &job),
-            (Simd::Four, RenderMode::IndexSolid) => render_band::<false, true, F32x4, S>(band, &job),
+            (Simd::Four, RenderMode::Full) => render_band::<true, true, false, F32x4, S>(band, &job),
+            (Simd::Four, RenderMode::IndexOnly) => render_band::<false, true, false, F32x4, S>(band, &job),
+            (Simd::Four, RenderMode::IndexSolid) => render_band::<false, true, true, F32x4, S>(band, &job),
+            (Simd::Four, RenderMode::Color) => render_band::<true, false, false, F32x4, S>(band, &job),
             #[cfg(target_arch = "x86_64")]
             (Simd::Eight, mode) => render_band_eight(band, &job, mode),
         }
@@ -212,15 +214,16 @@ struct BandJob<'a, S> {
 #[cfg(target_arch = "x86_64")]
 fn render_band_eight<S: Source>(band: Band, job: &BandJob<S>, mode: RenderMode) {
     #[target_feature(enable = "avx2")]
-    fn run<const COLOR: bool, const SOLID: bool, S: Source>(band: Band, job: &BandJob<S>) {
-        render_band::<COLOR, SOLID, crate::simd::F32x8, S>(band, job);
+    fn run<const COLOR: bool, const INDEX: bool, const SOLID: bool, S: Source>(band: Band, job: &BandJob<S>) {
+        render_band::<COLOR, INDEX, SOLID, crate::simd::F32x8, S>(band, job);
     }
     // SAFETY: `Simd::Eight` comes only from `Simd::detect`, which checked that the CPU has AVX2.
     unsafe {
         match mode {
-            RenderMode::Full => run::<true, false, S>(band, job),
-            RenderMode::IndexOnly => run::<false, false, S>(band, job),
-            RenderMode::IndexSolid => run::<false, true, S>(band, job),
+            RenderMode::Full => run::<true, true, false, S>(band, job),
+            RenderMode::IndexOnly => run::<false, true, false, S>(band, job),
+            RenderMode::IndexSolid => run::<false, true, true, S>(band, job),
+            RenderMode::Color => run::<true, false, false, S>(band, job),
         }
     }
 }
@@ -308,9 +311,14 @@ impl TileState {
     }
 }
 
-/// Blends every tile of `band` (those of the job's mask only, when it has one).
+/// Blends every tile of `band` (those of the job's mask only, when it has one): with `COLOR` the
+/// colour, with `INDEX` each pixel's heaviest Gaussian (the index image), with both the expected
+/// depth too ([`RenderMode::Full`]); with `SOLID` as [`RenderMode::IndexSolid`].
 #[inline(always)] // into `render_band_eight` too, so that the lanes compile for AVX2 there
-fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: Band, job: &BandJob<S>) {
+fn render_band<const COLOR: bool, const INDEX: bool, const SOLID: bool, V: Lanes, S: Source>(
+    band: Band,
+    job: &BandJob<S>,
+) {
     let &BandJob { width, height, grid_x, source, background, mask, near } = job;
     let row0 = band.row0;
     let rows = TILE.min(height - row0);
@@ -346,7 +354,7 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
                 if SOLID && g.depth <= in_front {
                     continue;
                 }
-                live = live.saturating_sub(blend::<COLOR, SOLID, V>(&mut state, &g, id, &columns, col0, row0));
+                live = live.saturating_sub(blend::<COLOR, INDEX, SOLID, V>(&mut state, &g, id, &columns, col0, row0));
                 if live == 0 {
                     break 'lists;
                 }
@@ -357,18 +365,22 @@ fn render_band<const COLOR: bool, const SOLID: bool, V: Lanes, S: Source>(band: 
             for x in 0..cols {
                 let o = y * width + col0 + x;
                 let t = state.transmittance[y][x];
-                let id = state.max_id[y][x];
-                if id == NO_GAUSSIAN {
-                    band.index[o] = -1;
-                    band.index_depth[o] = 0.0;
-                } else {
-                    band.index[o] = source.row(id) as i32;
-                    band.index_depth[o] = source.splat(id).depth;
+                if INDEX {
+                    let id = state.max_id[y][x];
+                    if id == NO_GAUSSIAN {
+                        band.index[o] = -1;
+                        band.index_depth[o] = 0.0;
+                    } else {
+                        band.index[o] = source.row(id) as i32;
+                        band.index_depth[o] = source.splat(id).depth;
+                    }
                 }
                 let a = 1.0 - t;
                 band.alpha[o] = a;
-                if COLOR {
+                if COLOR && INDEX {
                     band.depth[o] = if a > 0.0 { state.depth[y][x] / a } else { 0.0 };
+                }
+                if COLOR {
                     let color = [state.red[y][x], state.green[y][x], state.blue[y][x]];
                     for ((out, c), bg) in band.rgb[o * 3..o * 3 + 3].iter_mut().zip(color).zip(background) {
                         *out = c + t * bg;
@@ -401,7 +413,7 @@ const Q_FLOOR: f32 = -7.995_4;
 /// and `T' <= T`, so (rounding being monotone) at most `ALPHA_MAX * T`; where that is at most the
 /// largest weight so far, no later Gaussian is strictly heavier and the index cannot change.
 #[inline(always)]
-fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
+fn blend<const COLOR: bool, const INDEX: bool, const SOLID: bool, V: Lanes>(
     state: &mut TileState,
     g: &Splat2D,
     id: u32,
@@ -451,7 +463,7 @@ fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
                 let (q_dy, q_row) = (V::halves(dy0, dy1), V::halves(row0_term, row1_term));
                 let window = TwoRows { y, at };
                 let dx = lanes.mean_x - columns.pairs[at];
-                stopped += blend_window::<COLOR, SOLID, V, _>(state, window, bits, dx, q_dy, q_row, &lanes);
+                stopped += blend_window::<COLOR, INDEX, SOLID, V, _>(state, window, bits, dx, q_dy, q_row, &lanes);
             }
             y += 2;
         }
@@ -476,7 +488,8 @@ fn blend<const COLOR: bool, const SOLID: bool, V: Lanes>(
             if bits != 0 {
                 let dx = lanes.mean_x - columns.rows[at];
                 let window = OneRow { y, at };
-                stopped += blend_window::<COLOR, SOLID, V, _>(state, window, bits, dx, s(q_dy), s(q_row), &lanes);
+                stopped +=
+                    blend_window::<COLOR, INDEX, SOLID, V, _>(state, window, bits, dx, s(q_dy), s(q_row), &lanes);
             }
         }
     }
@@ -594,7 +607,7 @@ impl Window for TwoRows {
 /// pixels it stopped. Each lane's operations are those of `blend`'s description, whatever window
 /// holds it.
 #[inline(always)]
-fn blend_window<const COLOR: bool, const SOLID: bool, V: Lanes, W: Window>(
+fn blend_window<const COLOR: bool, const INDEX: bool, const SOLID: bool, V: Lanes, W: Window>(
     state: &mut TileState,
     window: W,
     bits: u32,
@@ -621,15 +634,17 @@ fn blend_window<const COLOR: bool, const SOLID: bool, V: Lanes, W: Window>(
     let weight = blended.keep(alpha * t);
     let new_t = blended.select(test_t, t);
     window.store(new_t, &mut state.transmittance);
-    let max_weight: V = window.load(&state.max_weight);
-    let better = weight.gt(max_weight);
-    let new_max = better.select(weight, max_weight);
-    window.store(new_max, &mut state.max_weight);
-    window.store_bits(better.select(g.id, window.load_bits(&state.max_id)), &mut state.max_id);
     let mut stop_bits = stop.bits();
-    if SOLID {
-        let decided = lanes.and((s(ALPHA_MAX) * new_t).le(new_max)).and((s(1.0) - new_t).ge(s(0.5)));
-        stop_bits |= decided.bits();
+    if INDEX {
+        let max_weight: V = window.load(&state.max_weight);
+        let better = weight.gt(max_weight);
+        let new_max = better.select(weight, max_weight);
+        window.store(new_max, &mut state.max_weight);
+        window.store_bits(better.select(g.id, window.load_bits(&state.max_id)), &mut state.max_id);
+        if SOLID {
+            let decided = lanes.and((s(ALPHA_MAX) * new_t).le(new_max)).and((s(1.0) - new_t).ge(s(0.5)));
+            stop_bits |= decided.bits();
+        }
     }
     if stop_bits != 0 {
         window.stop::<V>(&mut state.live, stop_bits);
@@ -642,7 +657,9 @@ fn blend_window<const COLOR: bool, const SOLID: bool, V: Lanes, W: Window>(
         add(&mut state.red, g.color[0]);
         add(&mut state.green, g.color[1]);
         add(&mut state.blue, g.color[2]);
-        add(&mut state.depth, g.z);
+        if INDEX {
+            add(&mut state.depth, g.z);
+        }
     }
     stop_bits.count_ones() as usize
 }

@@ -250,6 +250,22 @@ pub enum RenderMode {
     /// `alpha` is then exact below 0.5 and at least 0.5 where the full alpha is. What a sketch
     /// reads (docs/rendering.md, "Index and solid only"); over opaque objects far cheaper.
     IndexSolid,
+    /// rgb and alpha only, exactly as [`RenderMode::Full`] gives them: no index image and no
+    /// expected depth, so blending does not track each pixel's heaviest Gaussian. What a picture
+    /// or an animation frame needs (docs/rendering.md, "Colour only").
+    Color,
+}
+
+impl RenderMode {
+    /// Whether the Gaussians' colours are evaluated and `rgb` blended.
+    pub fn has_color(self) -> bool {
+        matches!(self, Self::Full | Self::Color)
+    }
+
+    /// Whether the index image and its depth are made.
+    pub fn has_index(self) -> bool {
+        self != Self::Color
+    }
 }
 
 /// Render settings.
@@ -273,7 +289,7 @@ pub struct StageTimings {
 }
 
 /// A rendered image set. Images are row-major `[row][col]`; `rgb` and `depth` are empty in the
-/// index modes.
+/// index modes, `depth`, `index` and `index_depth` in [`RenderMode::Color`].
 #[derive(Clone, Debug, Default)]
 pub struct RenderOutput {
     pub width: usize,
@@ -393,10 +409,9 @@ fn render(
 ) -> Result<RenderOutput, RasterError> {
     camera.validate()?;
     splats.validate()?;
-    let with_color = options.mode == RenderMode::Full;
 
     let start = Instant::now();
-    let projected = project::project(splats, camera, with_color, tiles);
+    let projected = project::project(splats, camera, options.mode.has_color(), tiles);
     let projected_at = Instant::now();
     let (n_visible, bins) = sort_and_bin(camera, &projected, tiles)?;
     let sorted_at = Instant::now();

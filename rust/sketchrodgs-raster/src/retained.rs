@@ -13,7 +13,7 @@ use crate::composite::{Source, blank, composite_into};
 use crate::project::{Input, Projected, Splat2D, project_each, project_static};
 use crate::tiles::TileMask;
 use crate::tiles::TileRect;
-use crate::{MAX_TILE_PAIRS, RasterError, RenderMode, RenderOptions, RenderOutput, Splats};
+use crate::{MAX_TILE_PAIRS, RasterError, RenderOptions, RenderOutput, Splats};
 
 /// A render kept from frame to frame.
 pub struct Retained {
@@ -98,8 +98,7 @@ impl Retained {
         }
         let mut is_moving = vec![false; n];
         moving.iter().for_each(|&r| is_moving[r as usize] = true);
-        let with_color = options.mode == RenderMode::Full;
-        let statics = project_static(splats, camera, with_color, &is_moving);
+        let statics = project_static(splats, camera, options.mode.has_color(), &is_moving);
         let order = sort_by_depth(&statics);
         let pairs: usize = order.iter().map(|&i| statics.rects[i as usize].area()).sum();
         if pairs > MAX_TILE_PAIRS {
@@ -160,7 +159,7 @@ impl Retained {
         let start = std::time::Instant::now();
         let cam = CameraF32::new(&self.camera);
         let k_sh = self.sh_coeffs;
-        let with_color = self.options.mode == RenderMode::Full;
+        let with_color = self.options.mode.has_color();
         let found: Vec<(u32, Splat2D, TileRect)> = self
             .moving
             .par_chunks(MOVING_PER_TASK)
@@ -262,7 +261,7 @@ fn merge<'a>(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::rasterize;
+    use crate::{RenderMode, rasterize};
 
     #[test]
     fn every_frame_equals_a_full_render() {
@@ -297,7 +296,7 @@ mod tests {
             cy: 50.0,
             world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
         };
-        for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid] {
+        for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid, RenderMode::Color] {
             let options = RenderOptions { background: [0.3, 0.2, 0.1], mode };
             let splats = |means: &[Vec3], quats: &[[f32; 4]]| {
                 let splats = Splats {

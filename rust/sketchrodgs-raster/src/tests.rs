@@ -99,9 +99,9 @@ fn four_and_eight_lanes_blend_the_same_bits() {
     let mut scene = Scene::random(20_000, 16, 5);
     scene.scales.iter_mut().step_by(37).for_each(|s| *s *= 15.0);
     let cam = camera(203, 117);
-    for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid] {
+    for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid, RenderMode::Color] {
         let options = RenderOptions { background: [0.2, 0.1, 0.4], mode };
-        let projected = project(&scene.splats(), &cam, mode == RenderMode::Full, None);
+        let projected = project(&scene.splats(), &cam, mode.has_color(), None);
         let order = sort_by_depth(&projected);
         let bins = TileBins::new(&cam, &projected.rects, &order, None).unwrap();
         let source = Binned { projected: &projected, bins: &bins };
@@ -112,7 +112,7 @@ fn four_and_eight_lanes_blend_the_same_bits() {
         });
         let [four, eight] = &mut outs;
         assert_eq!(four.index, eight.index);
-        assert!(four.index.iter().filter(|&&i| i >= 0).count() > 10_000);
+        assert!(four.alpha.iter().filter(|&&a| a > 0.1).count() > 10_000);
         for (a, b) in [(&four.alpha, &eight.alpha), (&four.rgb, &eight.rgb), (&four.depth, &eight.depth)] {
             assert_eq!(
                 a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
@@ -121,6 +121,22 @@ fn four_and_eight_lanes_blend_the_same_bits() {
         }
         assert_eq!(four.index_depth, eight.index_depth);
     }
+}
+
+#[test]
+fn color_mode_gives_the_full_renders_rgb_and_alpha_bits_without_index_or_depth() {
+    let mut scene = Scene::random(5_000, 16, 3);
+    scene.scales.iter_mut().step_by(29).for_each(|s| *s *= 10.0);
+    let cam = camera(110, 70);
+    let background = [0.2, 0.3, 0.1];
+    let render = |mode| rasterize(&scene.splats(), &cam, &RenderOptions { background, mode }).unwrap();
+    let (full, color) = (render(RenderMode::Full), render(RenderMode::Color));
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&color.rgb), bits(&full.rgb));
+    assert_eq!(bits(&color.alpha), bits(&full.alpha));
+    assert!(full.alpha.iter().filter(|&&a| a > 0.5).count() > 1_000);
+    assert!(color.index.is_empty() && color.index_depth.is_empty() && color.depth.is_empty());
+    assert_eq!((color.n_visible, color.n_tile_pairs), (full.n_visible, full.n_tile_pairs));
 }
 
 #[test]
