@@ -25,28 +25,22 @@ const GAUSSIANS_PER_CHUNK: usize = 16384;
 /// index (the order the reference's stable key sort gives).
 pub fn sort_by_depth(projected: &Projected) -> Vec<u32> {
     // z > NEAR_PLANE > 0 (a sort point's z >= 0), so the f32 bit pattern orders like the value.
-    // Keys are made in index order and the sort is stable, so equal depths stay in ascending index.
-    // A culled entry gets the key CULLED, above every depth's: it sorts last and is cut off.
+    // Keys are made in index order (rayon's collect keeps it) and the sort is stable, so equal
+    // depths stay in ascending index. Culled entries get no key: a view of part of a large scene
+    // sorts only what it sees.
     let mut keys = kept::SORT_KEYS.take();
-    (0..projected.rects.len())
-        .into_par_iter()
-        .with_min_len(MIN_GAUSSIANS_PER_TASK)
-        .map(
-            |i| {
-                if projected.rects[i].is_empty() { CULLED } else { (u64::from(projected.sort_key(i)) << 32) | i as u64 }
-            },
-        )
-        .collect_into_vec(&mut keys);
+    keys.clear();
+    keys.par_extend(
+        (0..projected.rects.len()).into_par_iter().with_min_len(MIN_GAUSSIANS_PER_TASK).filter_map(|i| {
+            (!projected.rects[i].is_empty()).then(|| (u64::from(projected.sort_key(i)) << 32) | i as u64)
+        }),
+    );
     radix_sort_by_high_word(&mut keys);
-    let visible = keys.partition_point(|&k| k != CULLED);
     let mut order = Vec::new();
-    keys[..visible].par_iter().with_min_len(MIN_GAUSSIANS_PER_TASK).map(|k| *k as u32).collect_into_vec(&mut order);
+    keys.par_iter().with_min_len(MIN_GAUSSIANS_PER_TASK).map(|k| *k as u32).collect_into_vec(&mut order);
     kept::SORT_KEYS.give_back(keys);
     order
 }
-
-/// The sort key of a culled entry: its depth bits are a NaN's, above those of any depth.
-const CULLED: u64 = u64::MAX;
 
 /// Bits of the key sorted per radix pass: three passes cover the 32-bit depth, and a pass's
 /// counters (8 KiB) stay in L1.
