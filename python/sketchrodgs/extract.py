@@ -310,8 +310,8 @@ def extract_rod(
     ):
         raise SketchRodGSError(f"smoothing: must be a number of radii in 0..{MAX_SMOOTHING:g}, got {smoothing!r}")
 
-    if render is not None and render.index_image.shape != (camera.height, camera.width):
-        shape = render.index_image.shape
+    shape = render.index_image.shape if render is not None else (camera.height, camera.width)
+    if shape != (camera.height, camera.width):
         raise SketchRodGSError(f"render: index image is {shape}, camera is {camera.height}x{camera.width}")
     given = render is not None
     # The band's tiles (unless the render was given), and where the search asks for them, the

@@ -97,16 +97,19 @@ class RenderResult:
     @property
     def index_image(self) -> np.ndarray:
         """`index`, or an error where the render has none (made with `outputs=("rgb", "alpha")`)."""
-        if self.index is None:
-            raise SketchRodGSError("this render has no index image (it was made for colour only: outputs='all' has it)")
-        return self.index
+        return _with_index(self.index)
 
     @property
     def index_depth_image(self) -> np.ndarray:
         """`index_depth`, or an error where the render has no index image (as `index_image`)."""
-        if self.index_depth is None:
-            raise SketchRodGSError("this render has no index image (it was made for colour only: outputs='all' has it)")
-        return self.index_depth
+        return _with_index(self.index_depth)
+
+
+def _with_index(image: np.ndarray | None) -> np.ndarray:
+    """`image` (the index image or its depth), or the error that the render has none."""
+    if image is None:
+        raise SketchRodGSError("this render has no index image (it was made for colour only: outputs='all' has it)")
+    return image
 
 
 def render(
