@@ -193,6 +193,8 @@ pub(crate) fn composite_with<S: Source>(
             (Simd::Four, RenderMode::Color) => render_band::<true, false, false, F32x4, S>(band, &job),
             #[cfg(target_arch = "x86_64")]
             (Simd::Eight, mode) => render_band_eight(band, &job, mode),
+            #[cfg(target_arch = "x86_64")]
+            (Simd::Sixteen, mode) => render_band_sixteen(band, &job, mode),
         }
     };
     bands.into_par_iter().with_max_len(1).for_each(render);
@@ -210,23 +212,31 @@ struct BandJob<'a, S> {
     near: Option<&'a [f32]>,
 }
 
-/// [`render_band`] with eight lanes, compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-fn render_band_eight<S: Source>(band: Band, job: &BandJob<S>, mode: RenderMode) {
-    #[target_feature(enable = "avx2")]
-    fn run<const COLOR: bool, const INDEX: bool, const SOLID: bool, S: Source>(band: Band, job: &BandJob<S>) {
-        render_band::<COLOR, INDEX, SOLID, crate::simd::F32x8, S>(band, job);
-    }
-    // SAFETY: `Simd::Eight` comes only from `Simd::detect`, which checked that the CPU has AVX2.
-    unsafe {
-        match mode {
-            RenderMode::Full => run::<true, true, false, S>(band, job),
-            RenderMode::IndexOnly => run::<false, true, false, S>(band, job),
-            RenderMode::IndexSolid => run::<false, true, true, S>(band, job),
-            RenderMode::Color => run::<true, false, false, S>(band, job),
+/// `fn $name(band, job, mode)`: [`render_band`] with the lanes `$lanes`, compiled for the CPU
+/// features `$features`, which only [`Simd::detect`] finding them lets `composite_with` call.
+macro_rules! render_band_with {
+    ($name:ident, $features:literal, $lanes:ty) => {
+        #[cfg(target_arch = "x86_64")]
+        fn $name<S: Source>(band: Band, job: &BandJob<S>, mode: RenderMode) {
+            #[target_feature(enable = $features)]
+            fn run<const COLOR: bool, const INDEX: bool, const SOLID: bool, S: Source>(band: Band, job: &BandJob<S>) {
+                render_band::<COLOR, INDEX, SOLID, $lanes, S>(band, job);
+            }
+            // SAFETY: `composite_with` calls this only for the `Simd` width `Simd::detect` chose,
+            // which it does only where the CPU has these features.
+            unsafe {
+                match mode {
+                    RenderMode::Full => run::<true, true, false, S>(band, job),
+                    RenderMode::IndexOnly => run::<false, true, false, S>(band, job),
+                    RenderMode::IndexSolid => run::<false, true, true, S>(band, job),
+                    RenderMode::Color => run::<true, false, false, S>(band, job),
+                }
+            }
         }
-    }
+    };
 }
+render_band_with!(render_band_eight, "avx2", crate::simd::F32x8);
+render_band_with!(render_band_sixteen, "avx512f,avx2", crate::simd::F32x16);
 
 /// `n` consecutive chunks of `len` (the last shorter), or `n` empty slices for an unused output.
 fn split_bands<T>(buf: &mut [T], len: usize, n: usize) -> Vec<&mut [T]> {
@@ -314,7 +324,7 @@ impl TileState {
 /// Blends every tile of `band` (those of the job's mask only, when it has one): with `COLOR` the
 /// colour, with `INDEX` each pixel's heaviest Gaussian (the index image), with both the expected
 /// depth too ([`RenderMode::Full`]); with `SOLID` as [`RenderMode::IndexSolid`].
-#[inline(always)] // into `render_band_eight` too, so that the lanes compile for AVX2 there
+#[inline(always)] // into `render_band_eight` and `_sixteen` too, so that the lanes compile for AVX2 / AVX-512 there
 fn render_band<const COLOR: bool, const INDEX: bool, const SOLID: bool, V: Lanes, S: Source>(
     band: Band,
     job: &BandJob<S>,
@@ -406,7 +416,7 @@ const Q_FLOOR: f32 = -7.995_4;
 /// position to its alpha, which blending waits on, is four operations shorter than
 /// `o exp(power)` and within 3e-7 of it. (The reference's `power > 0` skip cannot arise: the conic
 /// is positive definite, and `2^q` is clamped at 0.99 anyway.) Every lane does the same IEEE
-/// operations whatever the width, so four and eight lanes give the same bits.
+/// operations whatever the width, so four, eight and sixteen lanes give the same bits.
 ///
 /// With `SOLID` ([`RenderMode::IndexSolid`]) a pixel also stops once its index is decided and
 /// its alpha reached 0.5. Decided: every later weight is `alpha * T'` with `alpha <= ALPHA_MAX`

@@ -10,9 +10,9 @@
 //! Stages, each deterministic (the output never depends on the thread count): [`project`] every
 //! Gaussian (parallel), sort the visible ones by depth (a stable radix sort) and bin them into
 //! per-tile lists (parallel, [`bin`]), then [`composite`] each row of tiles (parallel) into
-//! disjoint parts of the outputs. Compositing works on SIMD groups of 8 pixels (AVX2, detected at
-//! run time) or 4 (SSE2, portable fallback elsewhere), bit-identical either way, and allocates
-//! nothing per pixel or per tile.
+//! disjoint parts of the outputs. Compositing works on SIMD groups of 16 pixels (AVX-512F), 8
+//! (AVX2; both detected at run time) or 4 (SSE2, portable fallback elsewhere), bit-identical at
+//! every width, and allocates nothing per pixel or per tile.
 //!
 //! ```
 //! use glam::Vec3;

@@ -335,7 +335,7 @@ fn project_each_with<'a>(
     emit: impl FnMut(usize, Splat2D, TileRect),
 ) {
     #[cfg(target_arch = "x86_64")]
-    if simd == Simd::Eight {
+    if matches!(simd, Simd::Eight | Simd::Sixteen) {
         #[target_feature(enable = "avx2")]
         fn run<'a>(
             count: usize,
@@ -346,7 +346,8 @@ fn project_each_with<'a>(
         ) {
             project_blocks(count, input, cam, camera, emit);
         }
-        // SAFETY: `Simd::Eight` comes only from `Simd::detect`, which found AVX2 on this CPU.
+        // SAFETY: `Simd::Eight` and `Simd::Sixteen` come only from `Simd::detect`, which found AVX2
+        // on this CPU for either.
         unsafe { run(count, input, cam, camera, emit) };
         return;
     }
@@ -672,7 +673,9 @@ mod tests {
             found
         };
         let four = run(Simd::Four);
-        assert_eq!(four, run(Simd::detect()));
+        for simd in Simd::available() {
+            assert_eq!(four, run(simd), "{simd:?}");
+        }
         let kept: Vec<usize> = four.iter().map(|f| f.0).collect();
         for (k, g) in inputs.iter().enumerate() {
             let z = g.mean.z; // the identity camera

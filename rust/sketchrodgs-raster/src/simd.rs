@@ -1,8 +1,10 @@
 //! SIMD lanes for blending, behind one trait ([`Lanes`]) so that the blend is written once: four
-//! f32 lanes (SSE2 on x86_64, part of its baseline so always there; plain arrays elsewhere) and,
-//! on x86_64 CPUs that have AVX2, eight ([`F32x8`], picked at run time by [`Simd::detect`]). All
-//! give bit-identical results: every operation is a single IEEE operation per lane in the same
-//! order, and nothing is fused (AVX2 does not include FMA, and Rust never contracts).
+//! f32 lanes (SSE2 on x86_64, part of its baseline so always there; plain arrays elsewhere), on
+//! x86_64 CPUs that have AVX2 eight ([`F32x8`]), and on those that also have AVX-512F sixteen
+//! ([`F32x16`]: a whole tile row, or two half rows, per vector), the widest picked at run time by
+//! [`Simd::detect`]. All give bit-identical results: every operation is a single IEEE operation
+//! per lane in the same order, and nothing is fused (none of these includes FMA, and Rust never
+//! contracts).
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::{
@@ -20,6 +22,10 @@ pub enum Simd {
     /// Eight lanes ([`F32x8`]); x86_64 with AVX2 only.
     #[cfg(target_arch = "x86_64")]
     Eight,
+    /// Sixteen lanes ([`F32x16`]) for blending (the projection runs eight); x86_64 with AVX-512F
+    /// and AVX2 only.
+    #[cfg(target_arch = "x86_64")]
+    Sixteen,
 }
 
 impl Simd {
@@ -27,9 +33,27 @@ impl Simd {
     pub fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                return Self::Sixteen;
+            }
             return Self::Eight;
         }
         Self::Four
+    }
+
+    /// Every lane width this CPU runs, narrowest first (for tests that compare them).
+    #[cfg(test)]
+    pub fn available() -> Vec<Self> {
+        let widest = Self::detect();
+        let all = [
+            Self::Four,
+            #[cfg(target_arch = "x86_64")]
+            Self::Eight,
+            #[cfg(target_arch = "x86_64")]
+            Self::Sixteen,
+        ];
+        let last = all.iter().position(|&s| s == widest).unwrap_or(0);
+        all[..=last].to_vec()
     }
 }
 
@@ -657,6 +681,171 @@ mod avx2 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+pub use avx512::F32x16;
+
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    //! Sixteen lanes on AVX-512F: a whole tile row, or two half rows, in one vector.
+    //!
+    //! SAFETY, for every `unsafe` block here: each only calls an AVX-512F intrinsic, and these
+    //! types are only ever created inside `composite::render_band_sixteen`, which runs only where
+    //! `Simd::detect` found AVX-512F, so the instructions exist.
+    use std::arch::x86_64::{
+        __m512, __mmask16, _CMP_GE_OQ, _CMP_GT_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _mm512_add_epi32, _mm512_add_ps,
+        _mm512_castps_si512, _mm512_castsi512_ps, _mm512_cmp_ps_mask, _mm512_mask_blend_ps, _mm512_maskz_mov_ps,
+        _mm512_max_ps, _mm512_min_ps, _mm512_mul_ps, _mm512_set1_epi32, _mm512_set1_ps, _mm512_slli_epi32,
+        _mm512_sub_epi32, _mm512_sub_ps,
+    };
+    use std::ops::{Add, Mul, Sub};
+
+    use super::{LaneMask, Lanes, pair_window, put_pair_window, put_window, window};
+
+    /// Sixteen f32 lanes.
+    #[derive(Clone, Copy, Debug)]
+    pub struct F32x16(__m512);
+
+    /// A per-lane mask of [`F32x16`]: one bit a lane.
+    #[derive(Clone, Copy, Debug)]
+    pub struct Mask16(__mmask16);
+
+    impl Lanes for F32x16 {
+        const N: usize = 16;
+        type Mask = Mask16;
+        #[inline(always)]
+        fn splat(v: f32) -> Self {
+            Self(unsafe { _mm512_set1_ps(v) })
+        }
+        #[inline(always)]
+        fn ramp() -> Self {
+            Self(bytemuck::cast(std::array::from_fn::<f32, 16, _>(|i| i as f32)))
+        }
+        #[inline(always)]
+        fn load(row: &[f32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(window::<16, f32>(row, at)))
+        }
+        #[inline(always)]
+        fn store(self, row: &mut [f32; 16], at: usize) {
+            put_window::<16, f32>(row, at, bytemuck::cast(self.0));
+        }
+        #[inline(always)]
+        fn load_bits(row: &[u32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(window::<16, u32>(row, at)))
+        }
+        #[inline(always)]
+        fn store_bits(self, row: &mut [u32; 16], at: usize) {
+            put_window::<16, u32>(row, at, bytemuck::cast(self.0));
+        }
+        #[inline(always)]
+        fn splat_bits(v: u32) -> Self {
+            Self(unsafe { _mm512_castsi512_ps(_mm512_set1_epi32(v as i32)) })
+        }
+        #[inline(always)]
+        fn load_pair(first: &[f32; 16], second: &[f32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(pair_window::<16, 8, f32>(first, second, at)))
+        }
+        #[inline(always)]
+        fn store_pair(self, first: &mut [f32; 16], second: &mut [f32; 16], at: usize) {
+            put_pair_window::<16, 8, f32>(first, second, at, bytemuck::cast(self.0));
+        }
+        #[inline(always)]
+        fn load_pair_bits(first: &[u32; 16], second: &[u32; 16], at: usize) -> Self {
+            Self(bytemuck::cast(pair_window::<16, 8, u32>(first, second, at)))
+        }
+        #[inline(always)]
+        fn store_pair_bits(self, first: &mut [u32; 16], second: &mut [u32; 16], at: usize) {
+            put_pair_window::<16, 8, u32>(first, second, at, bytemuck::cast(self.0));
+        }
+        #[inline(always)]
+        fn halves(low: f32, high: f32) -> Self {
+            Self(bytemuck::cast(std::array::from_fn::<f32, 16, _>(|i| if i < 8 { low } else { high })))
+        }
+        #[inline(always)]
+        fn min(self, other: Self) -> Self {
+            Self(unsafe { _mm512_min_ps(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn max(self, other: Self) -> Self {
+            Self(unsafe { _mm512_max_ps(self.0, other.0) })
+        }
+        // Ordered, non-signalling predicates: false on NaN, as `cmpltps` and friends.
+        #[inline(always)]
+        fn lt(self, other: Self) -> Mask16 {
+            Mask16(unsafe { _mm512_cmp_ps_mask::<_CMP_LT_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn le(self, other: Self) -> Mask16 {
+            Mask16(unsafe { _mm512_cmp_ps_mask::<_CMP_LE_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn ge(self, other: Self) -> Mask16 {
+            Mask16(unsafe { _mm512_cmp_ps_mask::<_CMP_GE_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn gt(self, other: Self) -> Mask16 {
+            Mask16(unsafe { _mm512_cmp_ps_mask::<_CMP_GT_OQ>(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn pow2_from_rounded(self, round_bits: u32) -> Self {
+            Self(unsafe {
+                let k = _mm512_sub_epi32(_mm512_castps_si512(self.0), _mm512_set1_epi32(round_bits as i32));
+                _mm512_castsi512_ps(_mm512_slli_epi32::<23>(_mm512_add_epi32(k, _mm512_set1_epi32(127))))
+            })
+        }
+    }
+
+    impl Add for F32x16 {
+        type Output = Self;
+        #[inline(always)]
+        fn add(self, other: Self) -> Self {
+            Self(unsafe { _mm512_add_ps(self.0, other.0) })
+        }
+    }
+
+    impl Sub for F32x16 {
+        type Output = Self;
+        #[inline(always)]
+        fn sub(self, other: Self) -> Self {
+            Self(unsafe { _mm512_sub_ps(self.0, other.0) })
+        }
+    }
+
+    impl Mul for F32x16 {
+        type Output = Self;
+        #[inline(always)]
+        fn mul(self, other: Self) -> Self {
+            Self(unsafe { _mm512_mul_ps(self.0, other.0) })
+        }
+    }
+
+    impl LaneMask<F32x16> for Mask16 {
+        #[inline(always)]
+        fn from_bits(bits: u32) -> Self {
+            Self(bits as __mmask16)
+        }
+        #[inline(always)]
+        fn bits(self) -> u32 {
+            u32::from(self.0)
+        }
+        #[inline(always)]
+        fn and(self, other: Self) -> Self {
+            Self(self.0 & other.0)
+        }
+        #[inline(always)]
+        fn and_not(self, other: Self) -> Self {
+            Self(self.0 & !other.0)
+        }
+        #[inline(always)]
+        fn select(self, a: F32x16, b: F32x16) -> F32x16 {
+            F32x16(unsafe { _mm512_mask_blend_ps(self.0, b.0, a.0) })
+        }
+        #[inline(always)]
+        fn keep(self, a: F32x16) -> F32x16 {
+            F32x16(unsafe { _mm512_maskz_mov_ps(self.0, a.0) })
+        }
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 mod tests {
@@ -748,14 +937,23 @@ mod tests {
         assert_eq!(lt.select(ints, F32x4::from_bits([0; 4])).to_bits(), [7, 8, 0, 0]);
     }
 
-    /// Eight AVX2 lanes give what two groups of four give, bit for bit, for every operation
-    /// blending uses (skipped on CPUs without AVX2).
+    /// Eight (AVX2) and sixteen (AVX-512F) lanes give what groups of four give, bit for bit, for
+    /// every operation blending uses (each width skipped on CPUs without it).
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn eight_lanes_match_four_bit_for_bit() {
-        if Simd::detect() != Simd::Eight {
-            return;
+    fn wide_lanes_match_four_bit_for_bit() {
+        let widths = Simd::available();
+        if widths.contains(&Simd::Eight) {
+            wide_matches_four::<F32x8>();
         }
+        if widths.contains(&Simd::Sixteen) {
+            wide_matches_four::<F32x16>();
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn wide_matches_four<V: Lanes>() {
+        let n = V::N;
         let specials = [0.0, -0.0, 1.0, -1.5, 1e-40, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 3.4e38, -87.3];
         let mut values: Vec<f32> = specials.to_vec();
         let mut state = 777u32;
@@ -765,19 +963,23 @@ mod tests {
             values.push(-((state >> 8) as f32) / 1e5); // exp's range
         }
         let row = |v: &[f32]| -> [f32; 16] { std::array::from_fn(|i| v[i % v.len()]) };
+        // Bits, except that every NaN is one: which operand's payload an operation on two NaNs
+        // returns is not defined (the compiler may swap a sum's operands), and blending never
+        // makes a NaN from finite inputs.
+        let bits = |v: &[f32]| v.iter().map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() }).collect::<Vec<_>>();
         for (a, b) in values.chunks_exact(16).zip(values.chunks_exact(16).rev()) {
             let (a, b) = (row(a), row(b));
-            for g in 0..2 {
-                let (a8, b8) = (F32x8::load(&a, 8 * g), F32x8::load(&b, 8 * g));
-                let (mut wide, mut narrow) = ([0.0f32; 16], [0.0f32; 16]);
-                let mut same = |f8: &dyn Fn(F32x8, F32x8) -> F32x8, f4: &dyn Fn(F32x4, F32x4) -> F32x4| {
-                    f8(a8, b8).store(&mut wide, 8 * g);
-                    for h in 0..2 {
-                        f4(F32x4::load(&a, 8 * g + 4 * h), F32x4::load(&b, 8 * g + 4 * h))
-                            .store(&mut narrow, 8 * g + 4 * h);
+            for at in (0..16).step_by(n) {
+                let (wa, wb) = (V::load(&a, at), V::load(&b, at));
+                let quads = |r: &[f32; 16]| (at..at + n).step_by(4).map(|k| (k, F32x4::load(r, k))).collect::<Vec<_>>();
+                let (qa, qb) = (quads(&a), quads(&b));
+                let same = |fw: &dyn Fn(V, V) -> V, f4: &dyn Fn(F32x4, F32x4) -> F32x4| {
+                    let (mut wide, mut narrow) = ([0.0f32; 16], [0.0f32; 16]);
+                    fw(wa, wb).store(&mut wide, at);
+                    for ((k, x), (_, y)) in qa.iter().zip(&qb) {
+                        f4(*x, *y).store(&mut narrow, *k);
                     }
-                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(&wide[g * 8..g * 8 + 8]), bits(&narrow[g * 8..g * 8 + 8]));
+                    assert_eq!(bits(&wide[at..at + n]), bits(&narrow[at..at + n]), "{n} lanes");
                 };
                 same(&|x, y| x + y, &|x, y| x + y);
                 same(&|x, y| x - y, &|x, y| x - y);
@@ -788,19 +990,29 @@ mod tests {
                 same(&|x, y| x.lt(y).select(x, y), &|x, y| x.lt(y).select(x, y));
                 same(&|x, y| x.le(y).keep(x), &|x, y| x.le(y).keep(x));
                 same(&|x, y| x.ge(y).and_not(y.gt(x)).select(y, x), &|x, y| x.ge(y).and_not(y.gt(x)).select(y, x));
-                let bits8 = a8.lt(b8).bits();
-                let bits4 = F32x4::load(&a, 8 * g).lt(F32x4::load(&b, 8 * g)).bits()
-                    | F32x4::load(&a, 8 * g + 4).lt(F32x4::load(&b, 8 * g + 4)).bits() << 4;
-                assert_eq!(bits8, bits4);
+                let wide_bits = wa.lt(wb).bits();
+                let narrow_bits = qa
+                    .iter()
+                    .zip(&qb)
+                    .enumerate()
+                    .fold(0, |acc, (i, ((_, x), (_, y)))| acc | x.lt(*y).bits() << (4 * i));
+                assert_eq!(wide_bits, narrow_bits);
             }
+            // two half rows in one vector: the pair loads and stores
+            let (pair, mut first, mut second) = (V::load_pair(&a, &b, 3), [0.0f32; 16], [0.0f32; 16]);
+            pair.store_pair(&mut first, &mut second, 3);
+            assert_eq!(bits(&first[3..3 + n / 2]), bits(&a[3..3 + n / 2]));
+            assert_eq!(bits(&second[3..3 + n / 2]), bits(&b[3..3 + n / 2]));
         }
-        for bits in 0..256u32 {
-            assert_eq!(<F32x8 as Lanes>::Mask::from_bits(bits).bits(), bits);
+        for bits in (0..1u32 << n).step_by(if n > 8 { 97 } else { 1 }) {
+            assert_eq!(V::Mask::from_bits(bits).bits(), bits);
         }
         let mut ids = [0u32; 16];
         let ramp: [u32; 16] = std::array::from_fn(|i| i as u32);
-        let lt = F32x8::ramp().lt(F32x8::splat(3.0));
-        lt.select(F32x8::splat_bits(9), F32x8::load_bits(&ramp, 8)).store_bits(&mut ids, 8);
-        assert_eq!(ids[8..], [9, 9, 9, 11, 12, 13, 14, 15]);
+        let at = 16 - n;
+        let lt = V::ramp().lt(V::splat(3.0));
+        lt.select(V::splat_bits(9), V::load_bits(&ramp, at)).store_bits(&mut ids, at);
+        let expected: Vec<u32> = (0..n).map(|i| if i < 3 { 9 } else { (at + i) as u32 }).collect();
+        assert_eq!(ids[at..], expected[..]);
     }
 }

@@ -89,37 +89,41 @@ fn output_is_identical_for_any_thread_count() {
 }
 
 #[test]
-fn four_and_eight_lanes_blend_the_same_bits() {
+fn every_lane_width_blends_the_same_bits() {
     use crate::composite::{Binned, blank, composite_with};
     use crate::simd::Simd;
-    if Simd::detect() == Simd::Four {
+    let widths = Simd::available();
+    if widths.len() < 2 {
         return; // nothing to compare against on this CPU
     }
     // Gaussians of all sizes, and an image whose width is not a multiple of the tile
     let mut scene = Scene::random(20_000, 16, 5);
     scene.scales.iter_mut().step_by(37).for_each(|s| *s *= 15.0);
     let cam = camera(203, 117);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid, RenderMode::Color] {
         let options = RenderOptions { background: [0.2, 0.1, 0.4], mode };
         let projected = project(&scene.splats(), &cam, mode.has_color(), None);
         let order = sort_by_depth(&projected);
         let bins = TileBins::new(&cam, &projected.rects, &order, None).unwrap();
         let source = Binned { projected: &projected, bins: &bins };
-        let mut outs = [Simd::Four, Simd::detect()].map(|simd| {
-            let mut out = blank(&cam, &options).unwrap();
-            composite_with(simd, &mut out, &cam, &source, &options, None, None);
-            out
-        });
-        let [four, eight] = &mut outs;
-        assert_eq!(four.index, eight.index);
+        let outs: Vec<RenderOutput> = widths
+            .iter()
+            .map(|&simd| {
+                let mut out = blank(&cam, &options).unwrap();
+                composite_with(simd, &mut out, &cam, &source, &options, None, None);
+                out
+            })
+            .collect();
+        let four = &outs[0];
         assert!(four.alpha.iter().filter(|&&a| a > 0.1).count() > 10_000);
-        for (a, b) in [(&four.alpha, &eight.alpha), (&four.rgb, &eight.rgb), (&four.depth, &eight.depth)] {
-            assert_eq!(
-                a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
-                b.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
-            );
+        for (wide, simd) in outs.iter().zip(&widths).skip(1) {
+            assert_eq!(four.index, wide.index, "{simd:?}");
+            for (a, b) in [(&four.alpha, &wide.alpha), (&four.rgb, &wide.rgb), (&four.depth, &wide.depth)] {
+                assert_eq!(bits(a), bits(b), "{simd:?}");
+            }
+            assert_eq!(four.index_depth, wide.index_depth, "{simd:?}");
         }
-        assert_eq!(four.index_depth, eight.index_depth);
     }
 }
 
