@@ -1,6 +1,6 @@
 //! Bindings for `sketchrodgs-raster`: `_core.rasterize(...)`.
 
-use numpy::ndarray::{Array2, Array3};
+use numpy::ndarray::{Array, Dimension, ShapeBuilder};
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
     PyUntypedArrayMethods,
@@ -303,31 +303,34 @@ pub struct Rendered {
 
 fn into_rendered(py: Python<'_>, out: RenderOutput) -> PyResult<Rendered> {
     let (h, w) = (out.height, out.width);
-    let shape_err = |e: numpy::ndarray::ShapeError| SketchRodGSError::new_err(format!("internal shape error: {e}"));
-    let image2 = |v: Vec<f32>| -> PyResult<Py<PyArray2<f32>>> {
-        Ok(Array2::from_shape_vec((h, w), v).map_err(shape_err)?.into_pyarray(py).unbind())
-    };
-    let some_image = |v: Vec<f32>| if v.is_empty() { Ok(None) } else { image2(v).map(Some) };
+    let alpha = image(py, (h, w), out.alpha)?.ok_or_else(|| SketchRodGSError::new_err("internal: no alpha"))?;
     Ok(Rendered {
-        rgb: if out.rgb.is_empty() {
-            None
-        } else {
-            Some(Array3::from_shape_vec((h, w, 3), out.rgb).map_err(shape_err)?.into_pyarray(py).unbind())
-        },
-        alpha: image2(out.alpha)?,
-        depth: some_image(out.depth)?,
-        index: if out.index.is_empty() {
-            None
-        } else {
-            Some(Array2::from_shape_vec((h, w), out.index).map_err(shape_err)?.into_pyarray(py).unbind())
-        },
-        index_depth: some_image(out.index_depth)?,
+        rgb: image(py, (h, w, 3), out.rgb)?,
+        alpha,
+        depth: image(py, (h, w), out.depth)?,
+        index: image(py, (h, w), out.index)?,
+        index_depth: image(py, (h, w), out.index_depth)?,
         project_s: out.timings.project_s,
         sort_s: out.timings.sort_s,
         composite_s: out.timings.composite_s,
         n_visible: out.n_visible,
         n_tile_pairs: out.n_tile_pairs,
     })
+}
+
+/// `values` as a numpy array of `shape` (moved, not copied), or None where the render did not make
+/// that output (an empty buffer).
+fn image<T: numpy::Element, D: Dimension>(
+    py: Python<'_>,
+    shape: impl ShapeBuilder<Dim = D>,
+    values: Vec<T>,
+) -> PyResult<Option<Py<numpy::PyArray<T, D>>>> {
+    if values.is_empty() {
+        return Ok(None);
+    }
+    let array = Array::from_shape_vec(shape, values)
+        .map_err(|e| SketchRodGSError::new_err(format!("internal shape error: {e}")))?;
+    Ok(Some(array.into_pyarray(py).unbind()))
 }
 
 /// Frees the buffers renders keep for the next one (see `sketchrodgs.render.release_buffers`).

@@ -116,7 +116,7 @@ pub fn blank(camera: &Camera, options: &RenderOptions) -> Result<RenderOutput, R
     let (width, height) = (camera.width as usize, camera.height as usize);
     let pixels = width * height;
     let colour = if options.mode.has_color() { pixels } else { 0 };
-    let depth = if options.mode == RenderMode::Full { pixels } else { 0 };
+    let depth = if options.mode.has_depth() { pixels } else { 0 };
     let index = if options.mode.has_index() { pixels } else { 0 };
     // reserve everything before touching any of it, and report what the whole image needs
     let total = (3 * colour + depth + 2 * index + pixels) * 4;
@@ -324,7 +324,7 @@ impl TileState {
 /// Blends every tile of `band` (those of the job's mask only, when it has one): with `COLOR` the
 /// colour, with `INDEX` each pixel's heaviest Gaussian (the index image), with both the expected
 /// depth too ([`RenderMode::Full`]); with `SOLID` as [`RenderMode::IndexSolid`].
-#[inline(always)] // into `render_band_eight` and `_sixteen` too, so that the lanes compile for AVX2 / AVX-512 there
+#[inline(always)] // into `render_band_eight` and `_sixteen` too, so that the lanes compile for their CPU there
 fn render_band<const COLOR: bool, const INDEX: bool, const SOLID: bool, V: Lanes, S: Source>(
     band: Band,
     job: &BandJob<S>,
@@ -388,6 +388,7 @@ fn render_band<const COLOR: bool, const INDEX: bool, const SOLID: bool, V: Lanes
                 let a = 1.0 - t;
                 band.alpha[o] = a;
                 if COLOR && INDEX {
+                    // `RenderMode::has_depth`
                     band.depth[o] = if a > 0.0 { state.depth[y][x] / a } else { 0.0 };
                 }
                 if COLOR {

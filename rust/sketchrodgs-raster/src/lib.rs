@@ -266,6 +266,11 @@ impl RenderMode {
     pub fn has_index(self) -> bool {
         self != Self::Color
     }
+
+    /// Whether the expected depth is made: with both the colour and the index ([`RenderMode::Full`]).
+    pub fn has_depth(self) -> bool {
+        self.has_color() && self.has_index()
+    }
 }
 
 /// Render settings.
