@@ -9,15 +9,34 @@ const RUN: usize = 16;
 /// is placed at the arc length of its nearest point on `stroke`; among the stroke's stretches
 /// within its `radius_px` of the nearest, the first not more than two radii behind the farthest
 /// placed point is taken, so that a stroke crossing itself is followed through the crossing. A
-/// point placed more than its radius behind the farthest kept one is left out.
+/// point placed more than its radius behind the farthest kept one is left out. The same is done
+/// from the far end (points and stroke reversed), and the choice that keeps more points is taken:
+/// the first point visited is always kept from the start, and where a big Gaussian owns the
+/// path's first pixels with its centre far along (a sprinkle of a few Gaussians), it cut out all
+/// those between.
 ///
 /// `points` and `radius_px` have one entry per point; non-finite points are left out. Fewer than
 /// two kept (or a stroke of fewer than two points): all are kept.
 pub fn forward_along_stroke(points: &[[f32; 2]], radius_px: &[f32], stroke: &[[f32; 2]]) -> Vec<bool> {
-    let mut keep = vec![false; points.len()];
     if stroke.len() < 2 {
         return vec![true; points.len()];
     }
+    let forward = in_order(points, radius_px, stroke);
+    let reversed = |v: &[[f32; 2]]| v.iter().rev().copied().collect::<Vec<_>>();
+    let radius_back: Vec<f32> = radius_px.iter().rev().copied().collect();
+    let mut backward = in_order(&reversed(points), &radius_back, &reversed(stroke));
+    backward.reverse();
+    let count = |keep: &[bool]| keep.iter().filter(|&&k| k).count();
+    let keep = if count(&backward) > count(&forward) { backward } else { forward };
+    if count(&keep) < 2 {
+        return vec![true; points.len()];
+    }
+    keep
+}
+
+/// `forward_along_stroke` from the first point on; `stroke` has at least two points.
+fn in_order(points: &[[f32; 2]], radius_px: &[f32], stroke: &[[f32; 2]]) -> Vec<bool> {
+    let mut keep = vec![false; points.len()];
     // per segment: start, direction, squared length, length, arc length at its start
     let mut segments = Vec::with_capacity(stroke.len() - 1);
     let mut s = 0.0_f32;
@@ -77,9 +96,6 @@ pub fn forward_along_stroke(points: &[[f32; 2]], radius_px: &[f32], stroke: &[[f
             farthest = farthest.max(placed);
         }
     }
-    if keep.iter().filter(|&&k| k).count() < 2 {
-        return vec![true; points.len()];
-    }
     keep
 }
 
@@ -98,6 +114,21 @@ mod tests {
         // a step back within the radius is the path's zigzag, and stays
         let points: Vec<[f32; 2]> = [0.0, 5.0, 4.0, 8.0].iter().map(|&x| [x, 0.0]).collect();
         assert_eq!(forward_along_stroke(&points, &[2.0; 4], &stroke), [true; 4]);
+    }
+
+    #[test]
+    fn a_first_point_far_along_does_not_cut_out_those_between() {
+        // a big Gaussian owns the path's first pixels with its centre far along (a sprinkle):
+        // from the start only it and those past it would be kept
+        let stroke = [[0.0, 0.0], [100.0, 0.0]];
+        let xs = [60.0, 10.0, 20.0, 30.0, 40.0, 50.0, 70.0];
+        let points: Vec<[f32; 2]> = xs.iter().map(|&x| [x, 1.0]).collect();
+        let keep = forward_along_stroke(&points, &[2.0; 7], &stroke);
+        assert_eq!(keep, [false, true, true, true, true, true, true]);
+        // and a last point far back is left out, as before
+        let xs = [10.0, 20.0, 30.0, 40.0, 50.0, 5.0];
+        let points: Vec<[f32; 2]> = xs.iter().map(|&x| [x, 1.0]).collect();
+        assert_eq!(forward_along_stroke(&points, &[2.0; 6], &stroke), [true, true, true, true, true, false]);
     }
 
     #[test]
@@ -129,7 +160,7 @@ mod tests {
             points.push([q[0] + 6.0 * next() - 3.0, q[1] + 6.0 * next() - 3.0]);
         }
         let radius: Vec<f32> = (0..points.len()).map(|_| 1.0 + 3.0 * next()).collect();
-        let keep = forward_along_stroke(&points, &radius, &stroke);
+        let keep = in_order(&points, &radius, &stroke);
         assert_eq!(keep, forward_by_every_segment(&points, &radius, &stroke));
         assert!(keep.iter().any(|&k| !k) && keep.iter().filter(|&&k| k).count() > 300);
     }
