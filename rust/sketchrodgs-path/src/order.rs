@@ -11,9 +11,9 @@ const RUN: usize = 16;
 /// placed point is taken, so that a stroke crossing itself is followed through the crossing. A
 /// point placed more than its radius behind the farthest kept one is left out. The same is done
 /// from the far end (points and stroke reversed), and the choice that keeps more points is taken:
-/// the first point visited is always kept from the start, and where a big Gaussian owns the
-/// path's first pixels with its centre far along (a sprinkle of a few Gaussians), it cut out all
-/// those between.
+/// from the start, the first point visited is always kept, so where a big Gaussian owns the path's
+/// first pixels with its centre far along (a sprinkle of a few Gaussians), all those between were
+/// left out.
 ///
 /// `points` and `radius_px` have one entry per point; non-finite points are left out. Fewer than
 /// two kept (or a stroke of fewer than two points): all are kept.
