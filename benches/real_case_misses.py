@@ -3,12 +3,20 @@ misses and its log-excess (`realcases.CaseScore.log_excess`), and the totals, fo
 the 10 held-out parts (tests/data/real_cases). Both cores, about 20 s; `benches/bench_extract.py`
 prints every figure.
 
-    python benches/real_case_misses.py [--held-out-only] [--only SUBSTRING]
+    python benches/real_case_misses.py [--held-out-only] [--only SUBSTRING] [--turned [--save F] [--against F]]
+
+`--turned` also extracts the cases' 139 turned views (about 15 s more) and prints their totals:
+estimates outside the radius target, rods folding back, and the views seen over 80 % whose rod
+(R given) lies over 1.5 R from its source view's rod, with the log of that excess. `--save F`
+writes each view's figures to F (JSON); `--against F` lists the views that moved since F was saved,
+so that a change is judged on them as on the cases (docs/extraction.md, "Turned views").
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import time
 from multiprocessing import Pool
 from pathlib import Path
@@ -17,6 +25,7 @@ from _table import print_table
 from sketchrodgs import realcases
 
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "real_cases"
+SEEN = 0.8  # a turned view counts as seen where this share of its rod is visible
 
 
 def score(job: tuple[str, int]) -> tuple[str, list[str], float]:
@@ -31,6 +40,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--held-out-only", action="store_true")
     parser.add_argument("--only", default="", help="cases whose name holds this")
+    parser.add_argument("--turned", action="store_true", help="the turned views' totals too")
+    parser.add_argument("--save", help="with --turned: write each turned view's figures to this JSON file")
+    parser.add_argument("--against", help="with --turned: list the turned views that moved since this file")
     args = parser.parse_args()
     files = [("heldout_cases.json", "10 held-out parts")]
     if not args.held_out_only:
@@ -52,6 +64,79 @@ def main() -> None:
                 ["case", "log-excess", "misses"],
                 [[name, f"{e:.2f}", "; ".join(misses) or "none"] for name, misses, e in results],
             )
+        if args.turned:
+            print_turned(pool, args.only, args.save, args.against)
+
+
+def turned_views(case_name: str) -> list[dict]:
+    """The figures of one case's turned views (R estimated for the radius, R given for the rest)."""
+    scenes, cases = realcases.load_cases(DATA / "cases.json")
+    case = next(c for c in cases if c["name"] == case_name)
+    scene = scenes[case["scene"]]
+    views = [v for v in realcases.load_turned_views(DATA / "turned_views.json") if v["case"] == case_name]
+    sources = {
+        v["name"]: realcases.view_rod(scene, case, v)
+        for v in case["views"]
+        if v["name"] in {t["source"] for t in views}
+    }
+    out = []
+    for view in views:
+        r = realcases.run_turned_view(scene, case, view, sources[view["source"]])
+        out.append(
+            {"name": r.name, "failed": bool(r.failed), "ratio": r.radius_ratio, "fold_back": r.fold_back}
+            | {"mean": r.mean, "max": r.max, "visible": r.visible}
+        )
+    return out
+
+
+def print_turned(pool, only: str, save: str | None, against: str | None) -> None:
+    """The totals of the turned views of the cases whose name holds `only`; with `save`, each view's
+    figures written; with `against`, the views that moved since that file."""
+    start = time.perf_counter()
+    _, cases = realcases.load_cases(DATA / "cases.json")
+    names = [c["name"] for c in cases if only in c["name"]]
+    views = [v for vs in pool.map(turned_views, names, chunksize=1) for v in vs]
+    t = realcases.TARGETS
+    done = [v for v in views if not v["failed"]]
+    seen_far = [v for v in done if v["visible"] >= SEEN and v["max"] > t["cross_max"]]
+    row = [
+        str(len(views)),
+        str(len(views) - len(done)),
+        str(sum(not t["radius_low"] <= v["ratio"] <= t["radius_high"] for v in done)),
+        str(sum(v["fold_back"] > t["fold_back"] for v in done)),
+        str(len(seen_far)),
+        f"{sum(math.log(v['max'] / t['cross_max']) for v in seen_far):.2f}",
+    ]
+    print_table(
+        f"turned views ({time.perf_counter() - start:.0f} s)",
+        [
+            "views",
+            "failed",
+            "R outside",
+            "fold back",
+            f"seen >= {SEEN:.0%}, over {t['cross_max']} R",
+            "their log-excess",
+        ],
+        [row],
+    )
+    if against:
+        before = {v["name"]: v for v in json.loads(Path(against).read_text(encoding="utf-8"))}
+        moved = [
+            [
+                v["name"],
+                f"{b['ratio']:.2f} -> {v['ratio']:.2f}",
+                f"{b['max']:.2f} -> {v['max']:.2f}",
+                f"{v['visible']:.2f}",
+            ]
+            for v in views
+            if (b := before.get(v["name"]))
+            and (abs(b["ratio"] - v["ratio"]) > 0.005 or abs(b["max"] - v["max"]) > 0.05 or b["failed"] != v["failed"])
+        ]
+        print_table(
+            f"turned views that moved since {against}: {len(moved)}", ["view", "R est. / R", "max (R)", "seen"], moved
+        )
+    if save:
+        Path(save).write_text(json.dumps(views, indent=0), encoding="utf-8")
 
 
 if __name__ == "__main__":
