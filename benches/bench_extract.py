@@ -202,12 +202,7 @@ def turned_views() -> None:
     t = realcases.TARGETS
     rows, totals = [], {"views": 0, "failed": 0, "radius": 0, "fold": 0}
     for case in cases:
-        scene, views = scenes[case["scene"]], [v for v in turned if v["case"] == case["name"]]
-        used = {v["source"] for v in views}
-        sources = {
-            view["name"]: realcases.view_rod(scene, case, view) for view in case["views"] if view["name"] in used
-        }
-        results = [realcases.run_turned_view(scene, case, v, sources[v["source"]]) for v in views]
+        results = realcases.run_turned_views(scenes[case["scene"]], case, turned)
         ok = [r for r in results if not r.failed]
         seen = [r for r in ok if r.visible >= 0.8]
         ratios = [r.radius_ratio for r in ok]

@@ -72,21 +72,12 @@ def turned_views(case_name: str) -> list[dict]:
     """The figures of one case's turned views (R estimated for the radius, R given for the rest)."""
     scenes, cases = realcases.load_cases(DATA / "cases.json")
     case = next(c for c in cases if c["name"] == case_name)
-    scene = scenes[case["scene"]]
-    views = [v for v in realcases.load_turned_views(DATA / "turned_views.json") if v["case"] == case_name]
-    sources = {
-        v["name"]: realcases.view_rod(scene, case, v)
-        for v in case["views"]
-        if v["name"] in {t["source"] for t in views}
-    }
-    out = []
-    for view in views:
-        r = realcases.run_turned_view(scene, case, view, sources[view["source"]])
-        out.append(
-            {"name": r.name, "failed": bool(r.failed), "ratio": r.radius_ratio, "fold_back": r.fold_back}
-            | {"mean": r.mean, "max": r.max, "visible": r.visible}
-        )
-    return out
+    turned = realcases.load_turned_views(DATA / "turned_views.json")
+    return [
+        {"name": r.name, "failed": bool(r.failed), "ratio": r.radius_ratio, "fold_back": r.fold_back}
+        | {"mean": r.mean, "max": r.max, "visible": r.visible}
+        for r in realcases.run_turned_views(scenes[case["scene"]], case, turned)
+    ]
 
 
 def print_turned(pool, only: str, save: str | None, against: str | None) -> None:

@@ -375,3 +375,12 @@ def run_turned_view(
         agreement = cs.polyline_agreement(source_rod.polyline, given.polyline, radius)
         result.mean, result.max = agreement["mean"], agreement["max"]
     return result
+
+
+def run_turned_views(scene: GaussianScene, case: dict[str, Any], turned: list[dict[str, Any]]) -> list[TurnedResult]:
+    """Extract every view of `turned` that belongs to `case`, each compared with its source view's
+    rod (`view_rod`, made once per source view)."""
+    views = [v for v in turned if v["case"] == case["name"]]
+    used = {v["source"] for v in views}
+    sources = {view["name"]: view_rod(scene, case, view) for view in case["views"] if view["name"] in used}
+    return [run_turned_view(scene, case, v, sources[v["source"]]) for v in views]

@@ -73,7 +73,7 @@ pub fn estimate_radius(
     let gap_at = |r: f32| crate::depth_gap(image, stroke, r, focal);
     let Some(rough) = slender_cluster(&first, gap_at) else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
-    let gap = crate::depth_gap(image, stroke, rough, focal);
+    let gap = gap_at(rough);
     // Whether the chain runs behind what is in front is decided as the search decides it, with
     // surfaces much wider than the first estimate scoring lower (docs/extraction.md, "What lies
     // behind"): a part seen behind leaves is then measured rather than the leaves. Where it stays
