@@ -113,6 +113,30 @@ def _teleported(rod: Rod, positions: np.ndarray) -> Rod:
     return rod
 
 
+def leaf_of_height(at_x: float, height: float, side: float = 1.0) -> np.ndarray:
+    """A petiole from the tube's surface, then a blade 6 R across whose far edge lies `height` R
+    from the axis, on the tube's `side` (+1 above, -1 below)."""
+    y = lambda r: 0.05 + side * r * R  # noqa: E731
+    stalk, top = sorted((y(0.8), y(height - 4))), sorted((y(height - 4), y(height)))
+    petiole = grid((at_x - 0.001, stalk[0], -0.001), (at_x + 0.001, stalk[1], 0.001), 0.0015)
+    blade = grid((at_x - 3 * R, top[0], -0.001), (at_x + 3 * R, top[1], 0.001), 0.002)
+    return np.concatenate([petiole, blade])
+
+
+def test_a_short_strokes_leaves_ride_with_it_up_to_twelve_radii():
+    # a stroke over 16 R of the tube: half its length is 8 R, but its leaves are as large as a
+    # long stroke's (the bundled demo's stem of 20 R has a leaf reaching 10.3 R from its joint)
+    short = AXIS[np.abs(AXIS[:, 0]) <= 0.08 + 1e-9]
+    assert polyline_length(short) == pytest.approx(16 * R)
+    assert default_attach_size(polyline_length(short), R) == pytest.approx(12 * R)
+    # one leaf reaching 10.4 R from where it joins, one (below) 14.3 R
+    scene, rows = with_extras(leaf=leaf_of_height(0.0, 10.0), large=leaf_of_height(0.0, 14.0, side=-1.0))
+    binding = segment_and_bind(short, scene, R)
+    ids = np.arange(len(scene))
+    assert np.isin(ids[rows["leaf"]], binding.gaussian_ids).all()
+    assert np.isin(ids[rows["large"]], binding.gaussian_ids).mean() < 0.2  # only its petiole's foot
+
+
 def test_attaching_can_be_turned_off_and_the_size_limit_holds():
     scene, rows = with_extras(leaf=leaf_on_a_petiole(0.1))
     leaf_rows = np.arange(len(scene))[rows["leaf"]]

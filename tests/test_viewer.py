@@ -5,6 +5,7 @@ Gaussians and its chunks, the app's actions, and `sketchrodgs view` serving a pa
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import signal
@@ -13,6 +14,7 @@ import subprocess
 import sys
 import time
 import urllib.request
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -450,25 +452,34 @@ def test_a_websocket_from_a_foreign_page_is_closed(ring):
 # ----- contact ------------------------------------------------------------------------------------
 
 
+@pytest.fixture(scope="module")
+def plant_push():
+    """The prepared push of `sketchrodgs demo --contact`: the plant's left side stem, held at its
+    far end, its near end dragged up past the main stem (data/plant_contact.json)."""
+    push = json.loads(resources.files(data).joinpath("plant_contact.json").read_text())
+    scene = load_scene(data.sample("plant"))
+    camera = Camera.from_dict(push["camera"])
+    extraction = extract_rod(scene, camera, np.asarray(push["stroke"]["points"], np.float64), radius=push["radius"])
+    return scene, camera, extraction, push
+
+
 @pytest.mark.parametrize("on", [True, False])
-def test_a_rod_pulled_into_the_scene_stays_out_with_contact_on(plant, on):
-    scene, extraction = plant
+def test_a_rod_pulled_into_the_scene_stays_out_with_contact_on(plant_push, on):
+    scene, camera, extraction, push = plant_push
     app = ViewerApp(scene, port=free_port(), up="-y", contact=on)
     try:
         app.loop.stop()  # frames stepped here
-        entry = app.add_extraction(extraction)
+        entry = app.add_extraction(extraction, clamp=push["clamp"])
         app.contact.rebuild().result(timeout=60)
         assert app.rods.has_scene_field and app.rods.contact.scene is on
         field = scene_field(app.rods.scene, [extraction.polyline], [extraction.radius], app.rods.owned_ids())
         polyline = extraction.polyline.astype(np.float64)
-        middle = len(polyline) // 2
-        # towards the nearest solid part of the scene, and as far again past it
-        solid = np.argwhere(field.values < 0)[:, ::-1] * field.spacing + field.origin
-        target = solid[np.argmin(np.linalg.norm(solid - polyline[middle], axis=1))]
-        app.rods.grab(entry.id, middle, polyline[middle])
+        grab = int(push["grab"])
+        offset = camera.screen_offset(polyline[grab], push["drag"])
+        app.rods.grab(entry.id, grab, polyline[grab])
         closest = np.inf
-        for k in range(1, 31):
-            app.rods.move_grab(entry.id, polyline[middle] + 2.0 * (target - polyline[middle]) * min(1.0, k / 15))
+        for k in range(1, 31):  # dragged across the main stem
+            app.rods.move_grab(entry.id, polyline[grab] + offset * min(1.0, k / 15))
             app.loop.frame()
             closest = min(closest, float(field.distance(np.asarray(entry.rod.positions)).min()))
         if on:

@@ -49,8 +49,11 @@ from .scene import GaussianScene
 # half-width (the estimated R): at 1.5 R a pulled plant stem left a ghost of itself behind.
 DEFAULT_GROW = 2.5
 ATTACH_SHARE = 0.5  # attached parts up to this share of the rod's length,
-ATTACH_MIN, ATTACH_MAX = 8.0, 20.0  # and between these many R
-CONTINUATION_SHARE = 1.0  # past an end, what fits within the rod's length (8-20 R) continues it,
+# and between these many R: the bundled plant's leaves reach up to 10.3 R from where they join a
+# stem of 20 R, a tree's twigs 9-9.8 R from a branch of 15 R (docs/deformation.md)
+ATTACH_MIN, ATTACH_MAX = 12.0, 20.0
+CONTINUATION_SHARE = 1.0  # past an end, what fits within the rod's length continues it,
+CONTINUATION_MIN, CONTINUATION_MAX = 8.0, 20.0  # and between these many R
 CONTINUATION_LINKS = 2.0  # linked at twice the part's link: a leaf's big faint Gaussians sit further apart
 END_MARGIN = 3.0  # within this many R of a rod end, only what lies past the end is attached
 # Neighbours: centres within LINK_SPACINGS times the part's typical 4th-neighbour spacing, kept
@@ -66,9 +69,10 @@ STRAY_END_RADII = 2.0
 
 
 def default_attach_size(length: float, radius: float) -> float:
-    """Attached parts up to half the rod's length, between 8 R and 20 R, ride with the rod (a leaf
-    on a stem is a third of the stem or more; the body a part joins is longer than the part; the
-    cap keeps the search around a long rope small)."""
+    """Attached parts up to half the rod's length, between 12 R and 20 R, ride with the rod (a leaf
+    on a stem is a third of the stem or more, and a short stroke's leaves are as large as a long
+    one's; the body a part joins is longer than the part; the cap keeps the search around a long
+    rope small)."""
     return float(np.clip(ATTACH_SHARE * length, ATTACH_MIN * radius, ATTACH_MAX * radius))
 
 
@@ -76,7 +80,7 @@ def default_continuation_size(length: float, radius: float) -> float:
     """What continues a part past an end rides with it up to the rod's length from the end,
     between 8 R and 20 R (a stem's tip with its leaves; the rest of a plant past a stem's base
     reaches further)."""
-    return float(np.clip(CONTINUATION_SHARE * length, ATTACH_MIN * radius, ATTACH_MAX * radius))
+    return float(np.clip(CONTINUATION_SHARE * length, CONTINUATION_MIN * radius, CONTINUATION_MAX * radius))
 
 
 @dataclass(frozen=True, eq=False)

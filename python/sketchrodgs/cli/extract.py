@@ -43,8 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--attach-size",
         type=positive,
         metavar="SIZE",
-        help="largest attached part that follows, in scene units (default: half the rod's length; past "
-        "an end, the rod's length)",
+        help="largest attached part that follows, in scene units (default: half the rod's length, "
+        "between 12 and 20 radii; past an end, the rod's length, between 8 and 20 radii)",
     )
     parser.add_argument(
         "-o",
