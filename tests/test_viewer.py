@@ -35,7 +35,7 @@ from sketchrodgs.viewer.camera import (
     unproject,
     viser_view,
 )
-from sketchrodgs.viewer.display import SceneDisplay, handle_radii
+from sketchrodgs.viewer.display import SceneDisplay, handle_radii, towards_camera
 from sketchrodgs.viewer.feedback import describe_failure
 from sketchrodgs.viewer.history import History, Step
 from sketchrodgs.viewer.material import Material
@@ -447,6 +447,18 @@ def test_a_websocket_from_a_foreign_page_is_closed(ring):
         assert app.origins.refused == 1
     finally:
         app.close()
+
+
+def test_the_balls_and_the_line_are_drawn_in_front_of_the_axis_where_it_is_seen():
+    camera = Camera.look_at((0.0, 0.0, -2.0), (0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), width=640, height=480)
+    points = np.random.default_rng(1).uniform(-0.3, 0.3, (50, 3))
+    lifted = towards_camera(points, 0.1, camera).astype(np.float64)
+    (seen, depth), (now, nearer) = camera.project(points), camera.project(lifted)
+    assert np.abs(now - seen).max() < 1e-3  # the same pixels
+    assert np.allclose(np.linalg.norm(lifted - points, axis=1), 0.1, rtol=1e-4) and (nearer < depth).all()
+    near = np.array([[0.0, 0.0, -1.95]])  # 0.05 from the camera: half way there at most
+    assert np.allclose(towards_camera(near, 0.1, camera), [[0.0, 0.0, -1.975]])
+    assert np.array_equal(towards_camera(points, 0.1, None), points.astype(np.float32))  # no view yet
 
 
 # ----- contact ------------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
 
-from sketchrodgs import Camera, data, load_scene
+from sketchrodgs import Camera, data, extract_rod, load_scene
 from sketchrodgs.viewer import ViewerApp, camera_from_viser
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium")) if p and os.path.exists(p)), None)
@@ -157,6 +157,12 @@ def ring_mask(page: Page) -> np.ndarray:
     """Where the (red-brown) ring is on viser's white background, in a screenshot."""
     image = screenshot(page).astype(np.int32)
     return (image[..., 0] - image[..., 2] > 40) & (image[..., 1] < 150)
+
+
+def changed_pixels(page: Page, before: np.ndarray, by: int = 40) -> int:
+    """How many pixels of the canvas differ from `before` (a `screenshot`) now, by more than `by`
+    (the sum over the channels)."""
+    return int((np.abs(screenshot(page).astype(np.int32) - before).sum(axis=2) > by).sum())
 
 
 def client_camera(client, width: int) -> Camera:
@@ -331,3 +337,38 @@ def test_a_page_of_another_origin_is_refused(session):
     finally:
         page.close()
         server.shutdown()
+
+
+def test_the_balls_show_on_a_real_stem(session, tmp_path):
+    """A real stem's Gaussians hid the balls drawn at its axis, so Play showed nothing to drag:
+    the balls and the rod's line now sit in front of the axis, towards the camera."""
+    scene = load_scene(data.sample("plant"))
+    extraction = extract_rod(scene, data.sample_camera("plant"), data.sample_stroke("plant"))
+    centre = extraction.polyline.astype(np.float64).mean(axis=0)
+    # seen as in the demo's view, from close enough that the stem spans most of the page
+    towards = data.sample_camera("plant").center - centre
+    eye = centre + 0.25 * towards / np.linalg.norm(towards)
+    start = Camera.look_at(eye, centre, up=(0.0, -1.0, 0.0), width=640, height=480, fov_y_deg=60.0)
+    app = ViewerApp(scene, host="127.0.0.1", port=free_port(), up="-y", camera=start, output_dir=tmp_path)
+    try:
+        app.add_extraction(extraction)
+        page = Session(app, session.browser).page  # a tab of its own, in the session's browser
+        try:
+            # the splats are sorted off the main thread: wait until the plant is drawn
+            wait_for(lambda: (screenshot(page).min(axis=2) < 200).mean() > 0.2, 30, "the plant to be drawn", 0.5)
+            page.keyboard.press("3")
+            shows(page, "drag a ball on a rod")
+            time.sleep(1.0)  # let the balls appear
+            with_balls = screenshot(page).astype(np.int32)
+            page.keyboard.press("h")
+            wait_for(lambda: changed_pixels(page, with_balls), 10, "the balls to hide")
+            time.sleep(0.5)
+            # where the balls were, the stem shows now: clearly other pixels (each channel by 50
+            # on average). Drawn at the axis, behind the stem's splats, they changed 172 pixels
+            # so; in front of them, 873.
+            balls = changed_pixels(page, with_balls, by=150)
+            assert balls > 500, balls
+        finally:
+            page.close()
+    finally:
+        app.close()

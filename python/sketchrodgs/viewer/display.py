@@ -49,6 +49,11 @@ SPLAT_UPDATES = ("exact", "segments")
 # between HANDLE_PIXELS (to be grabbed) in the view of the last tab that entered Play or moved there.
 HANDLE_RADII = 0.5
 HANDLE_PIXELS = (4.0, 9.0)
+# The splats hide what lies inside the part (viser draws them over meshes nearer the axis), so the
+# balls and the rod's line sit this many R in front of the axis towards that tab's camera (a ball
+# also by its own radius): on the part as seen, in front of its surface Gaussians, whose visible
+# half-width is R and whose footprint reaches about 1.5 R.
+SHOWN_LIFT_RADII = 1.5
 HANDLE_GAP = 3.0  # handle radii between the balls shown (a vertex closer to the last one has none)
 HANDLE_OPACITY = 0.8
 HANDLE_COLOUR = (90, 200, 255)
@@ -97,6 +102,19 @@ def handle_radii(rest: np.ndarray, radius: float, camera: Camera | None) -> tupl
             shown.append(v)
     vertices = np.array(shown, np.int64)
     return vertices, radii[vertices].astype(np.float32)
+
+
+def towards_camera(points: np.ndarray, lift: np.ndarray | float, camera: Camera | None) -> np.ndarray:
+    """`points` (N, 3) moved `lift` (scalar or (N,)) along their rays towards `camera`'s centre
+    (at most half way there): they draw where they were, in front of what surrounds them. Without a
+    camera they stay."""
+    points = np.asarray(points, np.float64)
+    if camera is None or len(points) == 0:
+        return points.astype(np.float32)
+    ray = camera.center[None, :] - points
+    distance = np.maximum(np.linalg.norm(ray, axis=1), 1e-12)
+    step = np.minimum(np.broadcast_to(np.asarray(lift, np.float64), distance.shape), 0.5 * distance)
+    return (points + ray * (step / distance)[:, None]).astype(np.float32)
 
 
 @dataclass
@@ -207,7 +225,7 @@ class SceneDisplay:
         positions = np.asarray(entry.rod.positions, np.float32)
         polyline = self.server.scene.add_line_segments(
             f"/overlay/rod_{entry.id}/polyline",
-            polyline_segments(positions),
+            polyline_segments(self._shown_line(entry, positions)),
             POLYLINE_COLOUR,
             thickness=2.0,
             thickness_units="screen",
@@ -224,7 +242,9 @@ class SceneDisplay:
         )
         vertices, radii = handle_radii(rest, entry.extraction.radius, self._handle_camera)
         colours = self._handle_colours(entry, None)
-        handles = self._add_handles(entry.id, positions, vertices, radii, colours)
+        handles = self._add_handles(
+            entry.id, self._ball_centres(entry, positions, vertices, radii), vertices, radii, colours
+        )
         poses = np.zeros((len(segments), 7))
         poses[:, 0] = 1.0
         poses[:, 4:] = rest[segments]
@@ -233,8 +253,20 @@ class SceneDisplay:
             splats, segments, packer, poses, polyline, handles, dots, dot_rows, centre, vertices, radii, colours
         )
 
+    def _shown_line(self, entry: RodEntry, positions: np.ndarray) -> np.ndarray:
+        """The rod's vertices where its line is drawn: in front of its axis (`SHOWN_LIFT_RADII`)."""
+        return towards_camera(positions, SHOWN_LIFT_RADII * entry.extraction.radius, self._handle_camera)
+
+    def _ball_centres(
+        self, entry: RodEntry, positions: np.ndarray, vertices: np.ndarray, radii: np.ndarray
+    ) -> np.ndarray:
+        """Where the balls of `vertices` (radii `radii`) are drawn: in front of the axis by
+        `SHOWN_LIFT_RADII` R and their own radius."""
+        lift = SHOWN_LIFT_RADII * entry.extraction.radius + np.asarray(radii, np.float64)
+        return towards_camera(positions[vertices], lift, self._handle_camera)
+
     def _add_handles(
-        self, rod_id: int, positions: np.ndarray, vertices: np.ndarray, radii: np.ndarray, colours: np.ndarray
+        self, rod_id: int, centres: np.ndarray, vertices: np.ndarray, radii: np.ndarray, colours: np.ndarray
     ) -> Any:
         mesh_vertices, faces = self._sphere
         handles = self.server.scene.add_batched_meshes_simple(
@@ -242,7 +274,7 @@ class SceneDisplay:
             mesh_vertices,
             faces,
             batched_wxyzs=np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (len(vertices), 1)),
-            batched_positions=positions[vertices],
+            batched_positions=centres,
             batched_scales=radii,
             batched_colors=colours[vertices],
             batched_opacities=np.full(len(vertices), HANDLE_OPACITY, np.float32),
@@ -281,14 +313,17 @@ class SceneDisplay:
             if nodes is None:
                 continue
             vertices, radii = handle_radii(entry.rod.rest_positions, entry.extraction.radius, camera)
+            positions = np.asarray(entry.rod.positions, np.float64)
+            nodes.polyline.points = polyline_segments(self._shown_line(entry, positions))  # lifted for this view
             if np.array_equal(vertices, nodes.handle_vertices):
                 if not np.allclose(radii, nodes.handle_radii, rtol=0.05, atol=0.0):
                     nodes.handles.batched_scales = radii
                     nodes.handle_radii = radii
+                nodes.handles.batched_positions = self._ball_centres(entry, positions, vertices, nodes.handle_radii)
                 continue
             nodes.handles.remove()  # another number of balls: a new node
-            positions = np.asarray(entry.rod.positions, np.float32)
-            nodes.handles = self._add_handles(entry.id, positions, vertices, radii, nodes.colours)
+            centres = self._ball_centres(entry, positions, vertices, radii)
+            nodes.handles = self._add_handles(entry.id, centres, vertices, radii, nodes.colours)
             nodes.handle_vertices, nodes.handle_radii = vertices, radii
 
     def shown_handles(self, rod_id: int) -> np.ndarray:
@@ -327,8 +362,10 @@ class SceneDisplay:
                 nodes.dots_stale = True
                 if self.dots_wanted:
                     self._move_dots(entry, nodes, rods, rotations, positions)
-                nodes.polyline.points = polyline_segments(positions)
-                nodes.handles.batched_positions = positions[nodes.handle_vertices]
+                nodes.polyline.points = polyline_segments(self._shown_line(entry, positions))
+                nodes.handles.batched_positions = self._ball_centres(
+                    entry, positions, nodes.handle_vertices, nodes.handle_radii
+                )
                 colours = self._handle_colours(entry, grabbed.get(entry.id))
                 if not np.array_equal(colours, nodes.colours):
                     nodes.handles.batched_colors = colours[nodes.handle_vertices]
