@@ -197,7 +197,6 @@ class ViewerApp:
             (self._centre, self._extent),
             on_change=self._tab_changed,
             on_stroke=self._stroke_drawn,
-            on_click=lambda tab, text: self.feedback.notify(tab.client, "info", "Nothing drawn", text),
             on_view=self._size_handles,
             working_width=lambda: int(self.panel.working_width.value),
         )

@@ -54,7 +54,6 @@ class Tab:
         reach: (3,) centre and extent of the scene, for the sketch surface.
         on_change: called with the tab after its mode or its toggles changed.
         on_stroke: called with the tab and its stroke when a stroke ends.
-        on_click: called with the tab and a message when a click does nothing in this mode.
         on_view: called with the tab when its camera moved in Play (at most every
             VIEW_UPDATE_SECONDS).
         working_width: returns the width of the render strokes are traced on.
@@ -67,7 +66,6 @@ class Tab:
         reach: tuple[np.ndarray, float],
         on_change: Callable[[Tab], None],
         on_stroke: Callable[[Tab, Stroke], None],
-        on_click: Callable[[Tab, str], object],
         on_view: Callable[[Tab], None],
         working_width: Callable[[], int],
     ) -> None:
@@ -76,7 +74,7 @@ class Tab:
         self.show_handles = True
         self.show_bound = True
         self._centre, self._extent = reach
-        self._on_change, self._on_stroke, self._on_click, self._on_view = on_change, on_stroke, on_click, on_view
+        self._on_change, self._on_stroke, self._on_view = on_change, on_stroke, on_view
         self._working_width = working_width
         self._lock = threading.RLock()
         self._stroke: Stroke | None = None
@@ -183,7 +181,9 @@ class Tab:
     # ----- sketch -----
 
     def _add_surface(self) -> None:
-        """The invisible box that catches this tab's strokes: around the scene and the camera."""
+        """The invisible box that catches this tab's strokes: around the scene and the camera. It
+        takes drags only: viser outlines a mesh that takes clicks in yellow while the pointer is
+        over it, and this one, around the camera, painted a yellow wedge over the scene."""
         reach = self._extent
         try:
             reach = max(reach, float(np.linalg.norm(self.client.camera.position - self._centre)))
@@ -200,10 +200,6 @@ class Tab:
             receive_shadow=False,
         )
         self._surface.on_drag("left")(self._on_drag)
-        self._surface.on_click(self._on_surface_click)
-
-    async def _on_surface_click(self, event: Any) -> None:
-        self._on_click(self, "A click does not draw: hold the button and drag along a slender part.")
 
     async def _on_drag(self, event: Any) -> None:
         # async: drag phases then arrive in order (viser awaits async callbacks on its loop)
