@@ -346,7 +346,12 @@ def test_a_page_of_another_origin_is_refused(session):
 def test_on_a_real_stem_the_balls_show_and_sketching_paints_nothing(session, tmp_path):
     """A real stem's Gaussians hid the balls drawn at its axis, so Play showed nothing to drag:
     the balls and the rod's line now sit in front of the axis, towards the camera."""
-    scene = load_scene(data.sample("plant"))
+    # the plant around the demo's stem (an eighth of its Gaussians: software WebGL on two cores
+    # draws the whole plant too slowly to wait for)
+    plant = load_scene(data.sample("plant"))
+    stem = extract_rod(plant, data.sample_camera("plant"), data.sample_stroke("plant")).polyline
+    near = np.all(np.abs(plant.means - stem.mean(axis=0)) < 0.12, axis=1)
+    scene = plant.subset(np.flatnonzero(near))
     extraction = extract_rod(scene, data.sample_camera("plant"), data.sample_stroke("plant"))
     centre = extraction.polyline.astype(np.float64).mean(axis=0)
     # seen as in the demo's view, from close enough that the stem spans most of the page
@@ -368,8 +373,8 @@ def test_on_a_real_stem_the_balls_show_and_sketching_paints_nothing(session, tmp
             wait_for(lambda: changed_pixels(page, with_balls), 10, "the balls to hide")
             time.sleep(0.5)
             # where the balls were, the stem shows now: clearly other pixels (each channel by 50
-            # on average). Drawn at the axis, behind the stem's splats, they changed 172 pixels
-            # so; in front of them, 873.
+            # on average). Drawn at the axis, behind the stem's splats, they changed 128 pixels
+            # so; in front of them, 877.
             balls = changed_pixels(page, with_balls, by=150)
             assert balls > 500, balls
             # in Sketch the pointer over the scene does not paint it: viser outlines a mesh that
@@ -383,7 +388,7 @@ def test_on_a_real_stem_the_balls_show_and_sketching_paints_nothing(session, tmp
                 page.mouse.move(box["x"] + (0.3 + 0.08 * k) * box["width"], box["y"] + 0.5 * box["height"])
                 time.sleep(0.3)
             time.sleep(1.0)
-            assert yellow_pixels(page) < 5000  # 44,228 with the wedge; the stem's light parts ~430
+            assert yellow_pixels(page) < 5000  # 58,664 with the wedge; the stem's light parts ~400
         finally:
             page.close()
     finally:
