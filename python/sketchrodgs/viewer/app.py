@@ -219,7 +219,9 @@ class ViewerApp:
                 self._grabs.pop(rod_id, None)
                 self.rods.release(rod_id)
         self.display.show_dots(self.rods, any(t.shows_dots for t in self.tabs.all()))
-        if tab.mode == "Play":
+        # the balls are for a tab in Play; the rod's line shows in Sketch too, so a tab entering
+        # Sketch places it for its view while no tab plays
+        if tab.mode == "Play" or (tab.mode == "Sketch" and all(t.mode != "Play" for t in self.tabs.all())):
             self._size_handles(tab)
 
     def _size_handles(self, tab: Tab) -> None:

@@ -46,7 +46,8 @@ from .splats import SplatArrays, SplatPacker, covariance_triu, splat_unit
 SplatUpdate = Literal["exact", "segments"]
 SPLAT_UPDATES = ("exact", "segments")
 # Handles are thin: a ball of half the rod's radius lets the rod's Gaussians show around it, kept
-# between HANDLE_PIXELS (to be grabbed) in the view of the last tab that entered Play or moved there.
+# between HANDLE_PIXELS (to be grabbed) in the view of the last tab that entered Play or moved
+# there (or entered Sketch while no tab played).
 HANDLE_RADII = 0.5
 HANDLE_PIXELS = (4.0, 9.0)
 # The splats hide what lies inside the part (viser draws them over meshes nearer the axis), so the
