@@ -5,7 +5,6 @@ Gaussians and its chunks, the app's actions, and `sketchrodgs view` serving a pa
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import signal
@@ -14,7 +13,6 @@ import subprocess
 import sys
 import time
 import urllib.request
-from importlib import resources
 
 import numpy as np
 import pytest
@@ -467,8 +465,8 @@ def test_the_balls_and_the_line_are_drawn_in_front_of_the_axis_where_it_is_seen(
 @pytest.fixture(scope="module")
 def plant_push():
     """The prepared push of `sketchrodgs demo --contact`: the plant's left side stem, held at its
-    far end, its near end dragged up past the main stem (data/plant_contact.json)."""
-    push = json.loads(resources.files(data).joinpath("plant_contact.json").read_text())
+    far end, its near end dragged up past the main stem (`data.contact_push`)."""
+    push = data.contact_push()
     scene = load_scene(data.sample("plant"))
     camera = Camera.from_dict(push["camera"])
     extraction = extract_rod(scene, camera, np.asarray(push["stroke"]["points"], np.float64), radius=push["radius"])

@@ -127,9 +127,6 @@ def push_past_the_main_stem(out_dir: str | Path, progress: Callable[[str], Any] 
     near end dragged up past the main stem, once with contact and once without (the prepared push
     of `data/plant_contact.json`). Writes `contact.png` (at rest, contact on, contact off, at the
     end of the hold, seen from another side) and `contact.mp4` (the push with contact, released)."""
-    import json
-    from importlib import resources
-
     from PIL import Image, ImageDraw
 
     from .camera import Camera
@@ -137,7 +134,7 @@ def push_past_the_main_stem(out_dir: str | Path, progress: Callable[[str], Any] 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    push = json.loads(resources.files(data).joinpath("plant_contact.json").read_text())
+    push = data.contact_push()
     scene = load_scene(data.sample("plant"))
     camera = Camera.from_dict(push["camera"], "plant_contact.json camera")
     shown = Camera.from_dict(push["show_camera"], "plant_contact.json show_camera")

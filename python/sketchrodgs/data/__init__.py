@@ -9,7 +9,7 @@ import json
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import SketchRodGSError
 
@@ -71,3 +71,10 @@ def sample_stroke(name: str) -> np.ndarray:
     if entry.stroke is None:
         raise SketchRodGSError(f"sample {name!r} has no prepared stroke")
     return np.asarray(json.loads(_path(entry.stroke).read_text())["points"], np.float64)
+
+
+def contact_push() -> dict[str, Any]:
+    """The prepared push of `sketchrodgs demo --contact` (plant_contact.json): the plant's left side
+    stem, its `camera` and `stroke`, `radius`, `clamp`, the `grab`bed vertex, the `drag` in that
+    camera's pixels and the `show_camera` it is seen from."""
+    return dict(json.loads(_path("plant_contact.json").read_text()))

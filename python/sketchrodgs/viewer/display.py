@@ -307,7 +307,8 @@ class SceneDisplay:
     # ----- handles -----
 
     def size_handles(self, rods: RodSet, camera: Camera) -> None:
-        """Size the handles for `camera`'s view (see `handle_radii`; call with `rods.lock` held)."""
+        """Size the handles for `camera`'s view (see `handle_radii`), and place them and the rods'
+        lines in front of the axes for it (`towards_camera`; call with `rods.lock` held)."""
         self._handle_camera = camera
         for entry in rods.entries:
             nodes = self._rods.get(entry.id)
