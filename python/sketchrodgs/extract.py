@@ -506,7 +506,10 @@ def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Ca
     the part's edge while its centre lies to the side, and would hook the rod's end towards it. A
     big Gaussian of the part itself (a flat stand leg is drawn by a few) has its centre on the path,
     though far along it from where the path first met it. Where that keeps fewer than half the
-    Gaussians within 2 R (a part of few Gaussians, a sprinkle seen edge-on), those are kept."""
+    Gaussians within 2 R (a part of few Gaussians, a sprinkle seen edge-on), those are kept. None
+    farther is ever kept: over one sprinkle a faint icing Gaussian 13 R long owned 101 of the path's
+    119 pixels, its centre 400 px off, and the rod ran there (docs/extraction.md, "Sprinkles from
+    their colour"); too few left makes the rod too short, a clear error."""
     pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
     ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     _, first = np.unique(ids, return_index=True)
@@ -519,7 +522,7 @@ def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Ca
     )
     if near.sum() < max(3, 0.5 * wide.sum()):
         near = wide
-    return ids[near] if near.sum() >= 2 else ids
+    return ids[near]
 
 
 def _forward_only(ids: np.ndarray, means: np.ndarray, camera: Camera, stroke: np.ndarray, radius: float) -> np.ndarray:
