@@ -52,6 +52,17 @@ def test_json_round_trip(tmp_path):
     (again,) = load_cameras(tmp_path / "cam.json")
     assert again.name == "front" and (again.width, again.height) == (320, 200)
     np.testing.assert_array_equal(again.world_to_camera, cam.world_to_camera)
+    assert again.near == 0.2 and "near" not in json.loads((tmp_path / "cam.json").read_text())
+
+
+def test_the_near_plane_travels_with_the_camera(tmp_path):
+    """A close-up's near plane is written with the camera (only where it is not the reference's
+    0.2, so older files read as before) and kept when the camera is resized."""
+    cam = Camera.look_at((0, 0, -0.1), (0, 0, 0), up=(0, -1, 0), near=0.01)
+    cam.save(tmp_path / "cam.json")
+    assert json.loads((tmp_path / "cam.json").read_text())["near"] == 0.01
+    (again,) = load_cameras(tmp_path / "cam.json")
+    assert again.near == 0.01 and again.resized(480).near == 0.01
 
 
 def test_oracle_camera_file_loads_by_index_and_name():
@@ -106,6 +117,9 @@ def test_resized_scales_intrinsics():
         ({"world_to_camera": np.diag([2.0, 1, 1, 1])}, "not a rigid transform"),
         ({"world_to_camera": np.diag([1.0, 1, -1, 1])}, "not a rigid transform"),
         ({"world_to_camera": np.eye(3)}, "expected shape"),
+        ({"near": 0.0}, "near: must be finite and > 0"),
+        ({"near": float("nan")}, "near: must be finite and > 0"),
+        ({"near": "close"}, "near: expected a number"),
     ],
 )
 def test_degenerate_cameras_are_errors(kwargs, message):

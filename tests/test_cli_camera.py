@@ -146,16 +146,26 @@ def test_render_says_why_nothing_is_visible_and_near_shows_it(tmp_path, capsys):
     assert (np.asarray(Image.open(tmp_path / "d.png")).max(axis=2) > 20).mean() > 0.3
 
 
-def test_near_moves_only_the_cull(scenes):
-    """Scaling scene and camera together leaves a render unchanged but for the near plane."""
-    from sketchrodgs.near_plane import render_near
+def test_a_cameras_near_plane_is_the_reference_cull_on_the_scene_scaled_up():
+    """A render is unchanged when the scene and the camera's position are scaled together
+    (projection, EWA footprint and SH direction are scale-free), but for the reference's cull at
+    z <= 0.2: so a camera whose near plane is z renders as the default camera does the scene
+    scaled by 0.2 / z. Checked on a close-up of the donut that the default plane culls whole."""
+    import dataclasses
 
-    ring = scenes["ring"]
-    camera = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=160, height=90)
-    plain, moved = render(ring, camera), render_near(ring, camera, 0.05)
-    np.testing.assert_allclose(moved.rgb, plain.rgb, atol=1e-5)
-    np.testing.assert_allclose(moved.depth, plain.depth, rtol=1e-5)
-    assert (moved.index == plain.index).mean() > 0.999
+    donut = load_scene(DATA / "donut.ply")
+    camera = Camera.look_at((0, 0, 0.17), (0, 0, 0), up=(0, -1, 0), width=160, height=90)
+    assert render(donut, camera).covered().mean() == 0
+    near, scale = 0.01, 0.2 / 0.01
+    close = render(donut, dataclasses.replace(camera, near=near))
+    matrix = camera.world_to_camera.copy()
+    matrix[:3, 3] *= scale
+    scaled = donut.replace(means=donut.means * np.float32(scale), scales=donut.scales * np.float32(scale))
+    oracle = render(scaled, dataclasses.replace(camera, world_to_camera=matrix))
+    assert close.covered().mean() > 0.3
+    np.testing.assert_allclose(close.rgb, oracle.rgb, atol=1e-4)
+    np.testing.assert_allclose(close.depth * scale, oracle.depth, rtol=1e-4)
+    assert (close.index == oracle.index).mean() > 0.999
 
 
 def test_info_reports_the_up_axis(capsys):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from conftest import DATA
 from sketchrodgs import Camera, GaussianScene, PathNotFoundError, SketchRodGSError, load_scene, synthetic
 from sketchrodgs.baseline import knn_path
 from sketchrodgs.extract import Extraction, extract_rod, load_rod
@@ -426,3 +427,31 @@ def test_a_failed_extraction_carries_what_it_found(straight_scene):
     with pytest.raises(PathNotFoundError, match="background") as caught:
         extract_rod(tubes.scene, CAMERA, np.array([[10.0, 10.0], [100.0, 10.0]]), radius=0.01, render=images)
     assert caught.value.stroke.shape == (2, 2) and caught.value.pixel_path == []
+
+
+def test_a_sprinkle_seen_from_nearer_than_0_2_extracts_with_the_cameras_near_plane():
+    """The donut is 0.2 across, so a user sketching a sprinkle (0.005 long) comes within 0.1 of it,
+    where the reference's near plane (0.2) culls it all. The camera's own near plane (the viewer's
+    is viser's, 0.01) is what extraction sees."""
+    import dataclasses
+
+    donut = load_scene(DATA / "donut.ply")
+    # sprinkle a of tests/data/real_cases/cases.json, stroked in its az180 view 0.3 away
+    cases = json.loads((DATA / "real_cases" / "cases.json").read_text(encoding="utf-8"))["cases"]
+    view = next(c for c in cases if c["name"] == "donut_sprinkle_a")["views"][0]
+    far = Camera.from_dict(view["camera"])
+    stroke = np.asarray(view["stroke"], np.float64)
+    rays = np.column_stack([(stroke - [far.cx, far.cy]) / [far.fx, far.fy], np.ones(len(stroke))]) * 0.3
+    points = rays @ far.camera_to_world[:3, :3].T + far.camera_to_world[:3, 3]
+    forward = far.camera_to_world[:3, 2]
+    target = far.center + 0.3 * forward
+    near_camera = Camera.look_at(
+        target - 0.06 * forward, target, up=-far.camera_to_world[:3, 1], fov_y_deg=50, near=0.01
+    )
+    near_stroke, _ = near_camera.project(points)
+    assert 40 < np.linalg.norm(near_stroke[-1] - near_stroke[0]) < 80  # pixels, as a user sees it
+    rod = extract_rod(donut, near_camera, near_stroke)
+    length = np.linalg.norm(np.diff(rod.polyline, axis=0), axis=1).sum()
+    assert 0.003 < length < 0.007 and 0.0003 < rod.radius < 0.0008, (length, rod.radius)
+    with pytest.raises(PathNotFoundError, match="background"):
+        extract_rod(donut, dataclasses.replace(near_camera, near=0.2), near_stroke)

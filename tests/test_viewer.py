@@ -102,6 +102,8 @@ def test_point_ahead_of_the_viser_camera_projects_to_the_image_centre(seed):
     np.testing.assert_allclose(depth[0], 2.5)
     assert uv[1, 0] > 480 and abs(uv[1, 1] - 360) < 1e-6  # +x is right
     assert uv[2, 1] > 360 and abs(uv[2, 0] - 480) < 1e-6  # +y is down
+    # the browser draws splats from viser's near plane on, and a sketch sees what it draws
+    assert camera.near == 0.2 and camera_from_viser(wxyz, position, 1.0, 1.5, near=0.01).near == 0.01
 
 
 def test_canvas_edges_are_the_image_edges():

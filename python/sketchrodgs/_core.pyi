@@ -155,6 +155,7 @@ def rasterize(
     tiles: npt.NDArray[np.bool_] | None = None,
     sh_rows: npt.NDArray[np.uint32] | None = None,
     sort_offsets: npt.NDArray[np.float32] | None = None,
+    near_plane: float = 0.2,
 ) -> Rendered: ...
 def rasterize_behind(
     means: npt.NDArray[np.float32],
@@ -175,6 +176,7 @@ def rasterize_behind(
     tiles: npt.NDArray[np.bool_] | None = None,
     sh_rows: npt.NDArray[np.uint32] | None = None,
     sort_offsets: npt.NDArray[np.float32] | None = None,
+    near_plane: float = 0.2,
 ) -> list[Rendered]: ...
 
 @final
@@ -221,6 +223,7 @@ class RetainedRender:
         mode: str = "all",
         sh_rows: npt.NDArray[np.uint32] | None = None,
         sort_offsets: npt.NDArray[np.float32] | None = None,
+        near_plane: float = 0.2,
     ) -> RetainedRender: ...
     def frame(
         self, means: npt.NDArray[np.float32], scales: npt.NDArray[np.float32], quats: npt.NDArray[np.float32]

@@ -22,6 +22,9 @@ from .jsonfile import read_json
 
 MAX_IMAGE_SIDE = 16384  # larger images are refused rather than allocated
 RIGID_TOLERANCE = 1e-4  # |R R^T - I| and |det R - 1| allowed in world_to_camera
+# The reference 3DGS rasteriser culls Gaussians at camera z <= 0.2 whatever the scene's units; our
+# cameras default to it (docs/rendering.md, "Near plane").
+NEAR_PLANE = 0.2
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,6 +37,8 @@ class Camera:
         cx, cy: principal point in continuous pixel coordinates (3DGS uses width/2, height/2).
         world_to_camera: (4, 4) float64 rigid transform, OpenCV axes.
         name: optional label (the image name of a 3DGS camera).
+        near: Gaussians at camera z at or below this are not drawn (> 0; default the reference's
+            0.2, whatever the scene's units: lower it for close-ups of a small scene).
     """
 
     width: int
@@ -44,6 +49,7 @@ class Camera:
     cy: float
     world_to_camera: np.ndarray = field(repr=False)
     name: str = ""
+    near: float = NEAR_PLANE
 
     def __post_init__(self) -> None:
         for attr in ("width", "height"):
@@ -68,6 +74,13 @@ class Camera:
             object.__setattr__(self, attr, value)
         if self.fx <= 0 or self.fy <= 0:
             raise CameraError(f"camera focal length must be > 0, got fx={self.fx}, fy={self.fy}")
+        try:
+            near = float(self.near)
+        except (TypeError, ValueError):
+            raise CameraError(f"camera near: expected a number, got {self.near!r}") from None
+        if not (math.isfinite(near) and near > 0):
+            raise CameraError(f"camera near: must be finite and > 0, got {near}")
+        object.__setattr__(self, "near", near)
         try:
             matrix = np.array(self.world_to_camera, dtype=np.float64)
         except (TypeError, ValueError):
@@ -145,7 +158,15 @@ class Camera:
             height = max(1, round(self.height * width / self.width))
         sx, sy = width / self.width, height / self.height
         return Camera(
-            width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, self.world_to_camera, self.name
+            width,
+            height,
+            self.fx * sx,
+            self.fy * sy,
+            self.cx * sx,
+            self.cy * sy,
+            self.world_to_camera,
+            self.name,
+            self.near,
         )
 
     # -- construction -------------------------------------------------------------------------
@@ -160,6 +181,7 @@ class Camera:
         height: int = 540,
         fov_y_deg: float = 37.8,
         name: str = "",
+        near: float = NEAR_PLANE,
     ) -> Camera:
         """A camera at `eye` looking at `target` with `up` pointing up in the image.
 
@@ -182,7 +204,7 @@ class Camera:
         if not 0 < fov_y_deg < 180:
             raise CameraError(f"look_at: fov_y_deg must be in (0, 180), got {fov_y_deg}")
         focal = height / (2 * math.tan(math.radians(fov_y_deg) / 2))
-        return cls(width, height, focal, focal, width / 2, height / 2, matrix, name)
+        return cls(width, height, focal, focal, width / 2, height / 2, matrix, name, near)
 
     @classmethod
     def orbit(
@@ -197,7 +219,7 @@ class Camera:
         """A look-at camera on a sphere around `target`.
 
         Azimuth turns about `up`; elevation lifts the eye towards `up`. Extra keyword arguments go
-        to `look_at` (width, height, fov_y_deg, name).
+        to `look_at` (width, height, fov_y_deg, name, near).
         """
         up_v = np.asarray(up, dtype=np.float64)
         up_v = up_v / np.linalg.norm(up_v)
@@ -226,6 +248,8 @@ class Camera:
         }
         if self.name:
             out["name"] = self.name
+        if self.near != NEAR_PLANE:
+            out["near"] = self.near
         return out
 
     @classmethod
@@ -246,6 +270,7 @@ class Camera:
                 data.get("cy", data["height"] / 2),
                 data["world_to_camera"],
                 str(data.get("name", "")),
+                data.get("near", NEAR_PLANE),
             )
         except CameraError as exc:
             raise CameraError(f"{source}: {exc}") from None

@@ -14,7 +14,7 @@ import numpy as np
 from . import _core
 from .camera import Camera
 from .errors import SketchRodGSError
-from .render import RenderResult, _background, _check_inputs, _core_inputs, _core_rows, render_mode
+from .render import RenderResult, _background, _check_inputs, _core_inputs, _core_keywords, render_mode
 from .scene import GaussianScene
 
 
@@ -47,7 +47,7 @@ class FrameRenderer:
             np.ascontiguousarray(moving, np.int64),
             background=_background(background),
             mode=self.mode,
-            **_core_rows(scene),
+            **_core_keywords(scene, camera),
         )
 
     def render(self, scene: GaussianScene) -> RenderResult:

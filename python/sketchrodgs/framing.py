@@ -15,9 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from .camera import Camera
+from .camera import NEAR_PLANE, Camera
 from .errors import CameraError
-from .near_plane import NEAR_PLANE
 from .scene import GaussianScene
 
 AXES = {

@@ -149,7 +149,9 @@ def render(
     bg = _background(background)
     mode = render_mode(outputs)
     tiles = _check_tiles(tiles, camera)
-    raw = _core.rasterize(*_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles, **_core_rows(scene))
+    raw = _core.rasterize(
+        *_core_inputs(scene, camera), background=bg, mode=mode, tiles=tiles, **_core_keywords(scene, camera)
+    )
     return RenderResult.from_core(raw, mode)
 
 
@@ -180,7 +182,7 @@ def render_behind(
         raise SketchRodGSError(f"count: expected a whole number of layers in 0..64, got {count!r}")
     tiles = _check_tiles(tiles, camera)
     raws = _core.rasterize_behind(*_core_inputs(scene, camera), np.ascontiguousarray(near, np.float32), int(count),
-                                  float(gap_px), tiles=tiles, **_core_rows(scene))  # fmt: skip
+                                  float(gap_px), tiles=tiles, **_core_keywords(scene, camera))  # fmt: skip
     return [RenderResult.from_core(raw, "solid") for raw in raws]
 
 
@@ -220,14 +222,16 @@ def _core_inputs(scene: GaussianScene, camera: Camera) -> _CoreInputs:
             camera.fx, camera.fy, camera.cx, camera.cy)  # fmt: skip
 
 
-class _CoreRows(TypedDict):
+class _CoreKeywords(TypedDict):
     sh_rows: np.ndarray | None
     sort_offsets: np.ndarray | None
+    near_plane: float
 
 
-def _core_rows(scene: GaussianScene) -> _CoreRows:
-    """The scene's optional per-row arrays, as the core's renderers take them (by keyword)."""
-    return {"sh_rows": scene.sh_rows, "sort_offsets": scene.sort_offsets}
+def _core_keywords(scene: GaussianScene, camera: Camera) -> _CoreKeywords:
+    """The scene's optional per-row arrays and the camera's near plane, as the core's renderers
+    take them (by keyword)."""
+    return {"sh_rows": scene.sh_rows, "sort_offsets": scene.sort_offsets, "near_plane": camera.near}
 
 
 TILE_SIZE = 16

@@ -31,6 +31,24 @@ def add_camera_file_argument(parser: argparse.ArgumentParser, help: str) -> None
     )
 
 
+def add_near_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--near",
+        type=positive,
+        metavar="Z",
+        help=f"Gaussians nearer to the camera than this (camera z, scene units) are {what} (default: the "
+        "camera's, 0.2 unless its JSON gives one: the reference 3DGS renderer's; lower it for close-ups of "
+        'small scenes; docs/cli.md, "The near plane")',
+    )
+
+
+def with_near(camera: Camera, args: argparse.Namespace) -> Camera:
+    """`camera` with the near plane of --near, if given."""
+    import dataclasses
+
+    return dataclasses.replace(camera, near=args.near) if args.near is not None else camera
+
+
 def add_framing_arguments(parser: argparse.ArgumentParser, default_size: tuple[int, int] | None) -> None:
     """--orbit, --distance, --up, --look-at, and --width/--height (with `default_size` for a
     framed camera; None: the image size of the camera file)."""

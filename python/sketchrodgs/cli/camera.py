@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ._args import IMAGE_SUFFIXES, output_file, scene_help, scene_path
-from ._framing import add_framing_arguments
+from ._framing import add_framing_arguments, add_near_argument
 
 NAME = "camera"
 HELP = "write a camera that shows the whole scene upright (no Python needed), optionally with a preview render"
@@ -29,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="also render the view (.png or .jpg)",
     )
     add_framing_arguments(parser, default_size=(960, 540))
+    add_near_argument(parser, "not drawn, written into the camera JSON")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import load_scene
     from ..near_plane import why_nothing_is_visible
     from ..render import COLOR_OUTPUTS, render
-    from ._framing import describe, framed_camera, scene_cameras
+    from ._framing import describe, framed_camera, scene_cameras, with_near
     from ._outputs import Outputs
 
     with Outputs() as outputs:
@@ -47,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
         cameras = scene_cameras(args)
         scene = load_scene(args.scene)
         camera, up = framed_camera(args, scene, cameras)
+        camera = with_near(camera, args)
         camera.save(camera_path)
         print(f"camera {describe(camera, up)} -> {args.output}")
         if preview_path is not None:

@@ -6,7 +6,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 from ._args import IMAGE_SUFFIXES, output_file, positive, scene_help, scene_path
-from ._framing import add_camera_file_argument
+from ._framing import add_camera_file_argument, add_near_argument
 
 if TYPE_CHECKING:
     import numpy as np
@@ -26,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="STROKE.json",
         help='the stroke in pixel coordinates of that camera: {"points": [[x, y], ...]}',
     )
+    add_near_argument(parser, "not seen")
     parser.add_argument("--radius", type=positive, help="the object's radius R in scene units (default: estimated)")
     parser.add_argument(
         "--alpha", type=float, default=1.0, help="weight of the stroke term of the path cost (default 1)"
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io import load_scene
     from ..render import render
     from ._args import UsageError
-    from ._framing import camera_file, scene_cameras
+    from ._framing import camera_file, scene_cameras, with_near
     from ._outputs import Outputs
 
     with Outputs() as outputs:
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         cameras = scene_cameras(args)
         if not cameras:
             raise UsageError("give --camera CAM.json (the scene is not a training output folder with a cameras.json)")
-        camera = select_camera(cameras, args.view, camera_file(args) or "")
+        camera = with_near(select_camera(cameras, args.view, camera_file(args) or ""), args)
         stroke = load_stroke(args.stroke)
         scene = load_scene(args.scene)
         # the overlay needs the whole colour image; without one the sketch renders only its band

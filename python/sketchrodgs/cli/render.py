@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from ._args import IMAGE_SUFFIXES, numbers, output_file, positive, scene_help, scene_path
-from ._framing import add_camera_file_argument, add_framing_arguments
+from ._args import IMAGE_SUFFIXES, numbers, output_file, scene_help, scene_path
+from ._framing import add_camera_file_argument, add_framing_arguments, add_near_argument
 
 NAME = "render"
 HELP = "render a scene for a camera to a PNG or JPEG, optionally with the index image K and its depth Z (.npz)"
@@ -40,14 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="R,G,B",
         help="background colour in [0, 1] (default 0,0,0)",
     )
-    parser.add_argument(
-        "--near",
-        type=positive,
-        default=0.2,
-        metavar="Z",
-        help="Gaussians nearer to the camera than this (camera z, scene units) are not drawn (default 0.2, "
-        "as the reference 3DGS renderer; lower it for close-ups of small scenes)",
-    )
+    add_near_argument(parser, "not drawn")
     add_framing_arguments(parser, default_size=None)
     parser.epilog = (
         "--width/--height resize a camera from a file (focal lengths scale; the aspect is kept if one is given)."
@@ -68,9 +61,9 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import SketchRodGSError
     from ..images import save_image
     from ..io import load_scene
-    from ..near_plane import render_near, why_nothing_is_visible
-    from ..render import COLOR_OUTPUTS
-    from ._framing import camera_file, framed_camera, framing_given, scene_cameras
+    from ..near_plane import why_nothing_is_visible
+    from ..render import COLOR_OUTPUTS, render
+    from ._framing import camera_file, framed_camera, framing_given, scene_cameras, with_near
     from ._outputs import Outputs
 
     if not args.output and not args.index:
@@ -91,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         start = time.perf_counter()
         # a picture alone needs no index image: colour only is cheaper (docs/rendering.md)
         outputs_wanted = ("all" if args.index else COLOR_OUTPUTS) if args.output else "index"
-        result = render_near(scene, camera, args.near, background=args.background, outputs=outputs_wanted)
+        camera = with_near(camera, args)
+        result = render(scene, camera, background=args.background, outputs=outputs_wanted)
         elapsed = time.perf_counter() - start
         if image_path is not None:
             save_image(image_path, result.rgb_image)
@@ -110,5 +104,5 @@ def run(args: argparse.Namespace) -> int:
         f"in {elapsed * 1e3:.1f} ms; {covered:.1%} of pixels covered"
     )
     if covered == 0:
-        print(f"sketchrodgs render: warning: {why_nothing_is_visible(scene, camera, args.near)}", file=sys.stderr)
+        print(f"sketchrodgs render: warning: {why_nothing_is_visible(scene, camera)}", file=sys.stderr)
     return 0

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera import NEAR_PLANE, Camera
 from ..errors import CameraError
 
 DEFAULT_WORKING_WIDTH = 960  # px; extraction renders at this width whatever the browser's size
@@ -45,6 +45,7 @@ def camera_from_viser(
     fov_y: float,
     aspect: float,
     width: int = DEFAULT_WORKING_WIDTH,
+    near: float = NEAR_PLANE,
 ) -> Camera:
     """Our camera for a viser client camera, at `width` pixels wide.
 
@@ -54,6 +55,9 @@ def camera_from_viser(
         fov_y: vertical field of view in radians.
         aspect: canvas width / height.
         width: image width of the returned camera; the height keeps the aspect ratio.
+        near: the near plane (viser's `client.camera.near`): what the browser draws, a sketch sees,
+            however near the user has come to a small scene (the reference's 0.2 would cull a
+            sprinkle the user sees from 0.1 away).
 
     The focal lengths are chosen so that the canvas' edges are the image's edges exactly (fx and
     fy differ by the rounding of the height, at most half a pixel over the image).
@@ -78,6 +82,7 @@ def camera_from_viser(
         cy=height / 2,
         world_to_camera=world_to_camera,
         name="viewer",
+        near=near,
     )
 
 

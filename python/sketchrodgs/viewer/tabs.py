@@ -168,7 +168,9 @@ class Tab:
         browser reported it."""
         try:
             cam = self.client.camera
-            return camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, width or int(cam.image_width))
+            return camera_from_viser(
+                cam.wxyz, cam.position, cam.fov, cam.aspect, width or int(cam.image_width), near=cam.near
+            )
         except (AssertionError, SketchRodGSError, ValueError):  # not reported yet, or a zero-size canvas
             return None
 
@@ -207,7 +209,9 @@ class Tab:
             return
         if event.phase == "start":
             cam = self.client.camera
-            self._stroke = Stroke(camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, self._working_width()))
+            self._stroke = Stroke(
+                camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, self._working_width(), near=cam.near)
+            )
             # draw the stroke halfway to the orbit centre: in front of what is looked at (viser washes
             # out lines very close to the camera)
             self._stroke_depth = max(2 * cam.near, 0.5 * float(np.linalg.norm(cam.look_at - cam.position)))

@@ -27,8 +27,9 @@ fn raster_err(err: RasterError) -> PyErr {
 /// `tiles` (ceil(H / 16), ceil(W / 16)) bool renders only those tiles (the rest is background).
 /// `sh_rows` (N,) uint32: the row of `sh` (then (M, K, 3)) each Gaussian takes its SH from.
 /// `sort_offsets` (N, 3) float32: where each Gaussian sorts, from its mean in its own axes.
+/// `near_plane`: Gaussians at camera z at or below it are culled (the reference's 0.2).
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sh_rows = None, sort_offsets = None))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sh_rows = None, sort_offsets = None, near_plane = 0.2))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -49,10 +50,11 @@ fn rasterize<'py>(
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
     sh_rows: Option<&Bound<'py, PyArray1<u32>>>,
     sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
+    near_plane: f64,
 ) -> PyResult<Rendered> {
     let scene = SceneInput::new(means, scales, quats, opacities, sh, sh_rows, sort_offsets)?;
     let splats = scene.splats()?;
-    let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
+    let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy, near_plane)?;
     let options = options_of(background, mode)?;
 
     let mask = tile_mask(&camera, tiles)?;
@@ -68,7 +70,7 @@ fn rasterize<'py>(
 /// (`sketchrodgs_raster::rasterize_behind`): `count` `Rendered`, each layer behind the last by
 /// `gap_px` pixels' world size. Scene, camera and `tiles` as for `rasterize`.
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, near, count, gap_px, tiles = None, sh_rows = None, sort_offsets = None))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, near, count, gap_px, tiles = None, sh_rows = None, sort_offsets = None, near_plane = 0.2))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize_behind<'py>(
     py: Python<'py>,
@@ -90,10 +92,11 @@ fn rasterize_behind<'py>(
     tiles: Option<&Bound<'py, PyArray2<bool>>>,
     sh_rows: Option<&Bound<'py, PyArray1<u32>>>,
     sort_offsets: Option<&Bound<'py, PyArray2<f32>>>,
+    near_plane: f64,
 ) -> PyResult<Vec<Rendered>> {
     let scene = SceneInput::new(means, scales, quats, opacities, sh, sh_rows, sort_offsets)?;
     let splats = scene.splats()?;
-    let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
+    let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy, near_plane)?;
     let mask = tile_mask(&camera, tiles)?;
     let near = near.try_readonly()?;
     check_shape("near", near.shape(), &[Some(height as usize), Some(width as usize)])?;
@@ -174,7 +177,8 @@ impl<'py> SceneInput<'py> {
     }
 }
 
-/// The camera from a (4, 4) float64 world-to-camera matrix and the intrinsics.
+/// The camera from a (4, 4) float64 world-to-camera matrix, the intrinsics and the near plane.
+#[allow(clippy::too_many_arguments)]
 fn camera_from(
     world_to_camera: &Bound<'_, PyArray2<f64>>,
     width: u32,
@@ -183,6 +187,7 @@ fn camera_from(
     fy: f64,
     cx: f64,
     cy: f64,
+    near: f64,
 ) -> PyResult<Camera> {
     let w2c = world_to_camera.try_readonly()?;
     check_shape("world_to_camera", w2c.shape(), &[Some(4), Some(4)])?;
@@ -190,7 +195,7 @@ fn camera_from(
     for (row, values) in matrix.iter_mut().zip(contiguous(&w2c, "world_to_camera")?.chunks_exact(4)) {
         row.copy_from_slice(values);
     }
-    Ok(Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix })
+    Ok(Camera { width, height, fx, fy, cx, cy, world_to_camera: matrix, near })
 }
 
 fn options_of(background: (f32, f32, f32), mode: &str) -> PyResult<RenderOptions> {
@@ -220,7 +225,7 @@ pub struct RetainedRender {
 #[pymethods]
 impl RetainedRender {
     #[new]
-    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sh_rows = None, sort_offsets = None))]
+    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sh_rows = None, sort_offsets = None, near_plane = 0.2))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -241,6 +246,7 @@ impl RetainedRender {
         mode: &str,
         sh_rows: Option<&Bound<'_, PyArray1<u32>>>,
         sort_offsets: Option<&Bound<'_, PyArray2<f32>>>,
+        near_plane: f64,
     ) -> PyResult<Self> {
         let scene = SceneInput::new(means, scales, quats, opacities, sh, sh_rows, sort_offsets)?;
         let splats = scene.splats()?;
@@ -251,7 +257,7 @@ impl RetainedRender {
             .map(|&r| u32::try_from(r).ok().filter(|&r| (r as usize) < n))
             .collect::<Option<Vec<u32>>>()
             .ok_or_else(|| SketchRodGSError::new_err(format!("moving: rows must be in 0..{n}")))?;
-        let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy)?;
+        let camera = camera_from(world_to_camera, width, height, fx, fy, cx, cy, near_plane)?;
         let options = options_of(background, mode)?;
         let retained = run_parallel(py, "RetainedRender", || Retained::new(&splats, &camera, &options, &rows))?
             .map_err(raster_err)?;

@@ -24,7 +24,7 @@ const GAUSSIANS_PER_CHUNK: usize = 16384;
 /// The visible (non-culled) Gaussians, front to back: sorted by camera z, ties by ascending
 /// index (the order the reference's stable key sort gives).
 pub fn sort_by_depth(projected: &Projected) -> Vec<u32> {
-    // z > NEAR_PLANE > 0 (a sort point's z >= 0), so the f32 bit pattern orders like the value.
+    // z > camera.near > 0 (a sort point's z >= 0), so the f32 bit pattern orders like the value.
     // Keys are made in index order (rayon's collect keeps it) and the sort is stable, so equal
     // depths stay in ascending index. Culled entries get no key: a view of part of a large scene
     // sorts only what it sees.

@@ -27,6 +27,9 @@ pub struct Camera {
     pub cy: f64,
     /// Row-major rigid world-to-camera transform `[[R | t], [0 0 0 1]]`.
     pub world_to_camera: [[f64; 4]; 4],
+    /// Gaussians whose centre has camera z at or below this are culled (> 0; the reference's
+    /// `in_frustum` uses [`crate::NEAR_PLANE`], 0.2, whatever the scene's units).
+    pub near: f64,
 }
 
 impl Camera {
@@ -52,6 +55,9 @@ impl Camera {
             if !c.is_finite() {
                 return bad(field, format!("must be finite, got {c}"));
             }
+        }
+        if !(self.near.is_finite() && self.near > 0.0) {
+            return bad("near", format!("must be finite and > 0, got {}", self.near));
         }
         let m = &self.world_to_camera;
         if m.iter().flatten().any(|v| !v.is_finite()) {
@@ -105,6 +111,7 @@ pub(crate) struct CameraF32 {
     pub fy: f32,
     pub cx: f32,
     pub cy: f32,
+    pub near: f32,
     /// Bounds of x/z (and y/z) used only for the EWA Jacobian: gsplat's general form of INRIA's
     /// 1.3 x tan(fov/2) clamp, identical to it when the principal point is the image centre.
     pub lim_x_neg: f32,
@@ -132,6 +139,7 @@ impl CameraF32 {
             fy: camera.fy as f32,
             cx: camera.cx as f32,
             cy: camera.cy as f32,
+            near: camera.near as f32,
             lim_x_neg: (camera.cx / camera.fx + 0.3 * tan_fovx) as f32,
             lim_x_pos: ((w - camera.cx) / camera.fx + 0.3 * tan_fovx) as f32,
             lim_y_neg: (camera.cy / camera.fy + 0.3 * tan_fovy) as f32,
@@ -154,6 +162,7 @@ mod tests {
             cx: 32.0,
             cy: 24.0,
             world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+            near: 0.2,
         }
     }
 

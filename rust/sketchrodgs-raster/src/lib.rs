@@ -21,6 +21,7 @@
 //! let camera = Camera {
 //!     width: 64, height: 48, fx: 50.0, fy: 50.0, cx: 32.0, cy: 24.0,
 //!     world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+//!     near: 0.2,
 //! };
 //! let means = [Vec3::new(0.0, 0.0, 2.0)];
 //! let scales = [Vec3::splat(0.05)];
@@ -59,8 +60,9 @@ pub use tiles::TileMask;
 
 /// Tiles are `TILE_SIZE x TILE_SIZE` pixels (INRIA's BLOCK_X = BLOCK_Y = 16).
 pub const TILE_SIZE: u32 = 16;
-/// Gaussians whose centre has camera z at or below this are culled (INRIA `in_frustum`).
-pub const NEAR_PLANE: f32 = 0.2;
+/// The reference's near plane (INRIA `in_frustum`): Gaussians whose centre has camera z at or below
+/// it are culled. Our cameras default to it ([`Camera::near`]).
+pub const NEAR_PLANE: f64 = 0.2;
 /// Low-pass filter added to both diagonal entries of the 2D covariance, in px².
 pub const LOW_PASS: f32 = 0.3;
 /// Footprint radius in standard deviations of the major axis.

@@ -8,7 +8,7 @@ use crate::camera::{Camera, CameraF32};
 use crate::kept;
 use crate::simd::Simd;
 use crate::tiles::{TileMask, TileRect};
-use crate::{ALPHA_MIN, LOW_PASS, NEAR_PLANE, SIGMA_EXTENT, Splats, TILE_SIZE};
+use crate::{ALPHA_MIN, LOW_PASS, SIGMA_EXTENT, Splats, TILE_SIZE};
 
 /// Gaussians per rayon task in the per-Gaussian passes.
 pub(crate) const MIN_GAUSSIANS_PER_TASK: usize = 4096;
@@ -258,7 +258,7 @@ impl<'a> Reach<'a> {
             v[k] = c.fy * p.y * inv_z + c.cy - 0.5;
             r[k] = self.scale_to_px * s * inv_z + self.floor_px;
             // NaN anywhere fails a comparison, and the exact projection culls it too
-            near[k] = p.z > NEAR_PLANE && opacities[k] >= ALPHA_MIN;
+            near[k] = p.z > c.near && opacities[k] >= ALPHA_MIN;
         }
         for k in 0..REACH_BLOCK {
             let inside = u[k] + r[k] >= bx0 && u[k] - r[k] <= bx1 && v[k] + r[k] >= by0 && v[k] - r[k] <= by1;
@@ -403,7 +403,7 @@ fn project_block(inputs: &[Input; LANES], cam: &CameraF32, camera: &Camera) -> [
         let y = w.x_axis.y * mx[l] + w.y_axis.y * my[l] + w.z_axis.y * mz[l] + t.y;
         let z = w.x_axis.z * mx[l] + w.y_axis.z * my[l] + w.z_axis.z * mz[l] + t.z;
         // alpha = min(0.99, opacity * exp(power)) <= opacity: below 1/255 it is skipped everywhere
-        let mut ok = opacity[l] >= ALPHA_MIN && z > NEAR_PLANE;
+        let mut ok = opacity[l] >= ALPHA_MIN && z > cam.near;
         let inv_z = 1.0 / z;
 
         // EWA Jacobian at the mean, with x/z and y/z clamped (for J only) as the reference does.
@@ -646,6 +646,7 @@ mod tests {
             cx: 48.0,
             cy: 32.0,
             world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+            near: 0.2,
         };
         // some behind the camera, off the image, nearly transparent, or NaN
         let inputs: Vec<Input> = (0..1001)
@@ -679,7 +680,7 @@ mod tests {
         let kept: Vec<usize> = four.iter().map(|f| f.0).collect();
         for (k, g) in inputs.iter().enumerate() {
             let z = g.mean.z; // the identity camera
-            let expected = g.opacity >= ALPHA_MIN && z > NEAR_PLANE;
+            let expected = g.opacity >= ALPHA_MIN && z > camera.near as f32;
             if !expected {
                 assert!(!kept.contains(&k), "Gaussian {k} should be culled");
             }

@@ -17,6 +17,7 @@ fn camera(width: u32, height: u32) -> Camera {
         cx: f64::from(width) / 2.0 + 0.5,
         cy: f64::from(height) / 2.0 + 0.5,
         world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+        near: 0.2,
     }
 }
 
@@ -502,4 +503,33 @@ fn each_layer_lies_a_gap_behind_the_one_before() {
     let some = rasterize_behind(&scene.splats(), &cam, Some(&mask), &near, 2, 8.0).unwrap();
     assert_eq!((some[1].index[0], some[1].index[centre]), (2, -1));
     assert!(rasterize_behind(&scene.splats(), &cam, None, &near[1..], 1, 8.0).is_err());
+}
+
+#[test]
+fn the_near_plane_is_the_cameras() {
+    // one Gaussian 0.1 in front of the camera: culled at the reference's 0.2, drawn at 0.05
+    let scene = Scene {
+        means: vec![Vec3::new(0.0, 0.0, 0.1)],
+        scales: vec![Vec3::splat(0.01)],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]],
+        opacities: vec![0.9],
+        sh: vec![1.0, 1.0, 1.0],
+        k: 1,
+    };
+    let reference = camera(32, 32);
+    assert_eq!(render(&scene, &reference).n_visible, 0);
+    let close = Camera { near: 0.05, ..reference };
+    let out = render(&scene, &close);
+    assert_eq!(out.n_visible, 1);
+    assert_eq!(out.index[16 * 32 + 16], 0);
+    for near in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let bad = Camera { near, ..reference };
+        assert!(
+            matches!(
+                rasterize(&scene.splats(), &bad, &RenderOptions::default()),
+                Err(RasterError::InvalidCamera { field: "near", .. })
+            ),
+            "near {near}"
+        );
+    }
 }
