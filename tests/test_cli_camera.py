@@ -144,6 +144,14 @@ def test_render_says_why_nothing_is_visible_and_near_shows_it(tmp_path, capsys):
     assert main([*base, "--near", "0.01"]) == 0
     assert "nothing is visible" not in capsys.readouterr().err
     assert (np.asarray(Image.open(tmp_path / "d.png")).max(axis=2) > 20).mean() > 0.3
+    # a camera JSON carries its near plane, which render (and extract, animate) then use
+    near_camera = tmp_path / "near.json"
+    Camera.look_at((0, 0, 0.17), (0, 0, 0), up=(0, -1, 0), width=160, height=90, near=0.01).save(near_camera)
+    assert main([*base[:3], str(near_camera), *base[4:]]) == 0
+    assert "nothing is visible" not in capsys.readouterr().err
+    assert (np.asarray(Image.open(tmp_path / "d.png")).max(axis=2) > 20).mean() > 0.3
+    assert main(["camera", str(DATA / "donut.ply"), "-o", str(tmp_path / "framed.json"), "--near", "0.05"]) == 0
+    assert json.loads((tmp_path / "framed.json").read_text())["near"] == 0.05
 
 
 def test_a_cameras_near_plane_is_the_reference_cull_on_the_scene_scaled_up():
