@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import _core
+from . import _core, near_plane
 from . import polyline as pl
 from . import segment as sg
 from .atomic import atomic_open, atomic_write_text
@@ -430,7 +430,7 @@ def _trace(
                 index, depth, opacity, work, focal, float(band_px or 0.0), **region, colours=colours
             )
         except PathNotFoundError as err:
-            raise _failure(str(err), stroke, []) from None
+            raise _failure(_with_near_plane_hint(str(err), scene, camera, stroke), stroke, []) from None
         timings["estimate_radius"] = time.perf_counter() - clock
         clock = time.perf_counter()
 
@@ -449,7 +449,7 @@ def _trace(
                 **region,
             )
         except PathNotFoundError as err:
-            raise _failure(str(err), stroke, []) from None
+            raise _failure(_with_near_plane_hint(str(err), scene, camera, stroke), stroke, []) from None
         pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
@@ -469,6 +469,15 @@ def _trace(
         trace, pixel_path, path_ids, points = trace_path(radius)
     timings["path_search"] = time.perf_counter() - clock
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
+
+
+def _with_near_plane_hint(message: str, scene: GaussianScene, camera: Camera, stroke: np.ndarray) -> str:
+    """`message`, and where the stroke lies on background only because what it was drawn over is
+    nearer than the camera's near plane (a close-up of a small scene), how to see it."""
+    if "background" not in message:
+        return message
+    hint = near_plane.culled_under_stroke(scene, camera, stroke)
+    return f"{message}; {hint}" if hint else message
 
 
 def _shown_colours(

@@ -5,6 +5,8 @@ close-up of a small scene can lose all of it (docs/rendering.md, "Near plane").
 
 from __future__ import annotations
 
+import numpy as np
+
 from .camera import Camera
 from .scene import GaussianScene
 
@@ -27,3 +29,19 @@ def why_nothing_is_visible(scene: GaussianScene, camera: Camera) -> str:
     if not inside.any():
         return "nothing is visible: the camera looks away from the scene (`sketchrodgs camera` frames it)"
     return "nothing is visible: the Gaussians in view are too faint or too small to cover a pixel"
+
+
+def culled_under_stroke(scene: GaussianScene, camera: Camera, stroke: np.ndarray, reach_px: float = 10.0) -> str | None:
+    """Where Gaussians nearer than the near plane project within `reach_px` of the stroke's box (the
+    stroke lay on background: what the user drew over was culled), what to do about it; else None."""
+    uv, depth = camera.project(scene.means)
+    points = np.asarray(stroke, np.float64).reshape(-1, 2)
+    low, high = points.min(axis=0) - reach_px, points.max(axis=0) + reach_px
+    culled = np.all((uv >= low) & (uv <= high), axis=1) & (depth > 0) & (depth <= camera.near)
+    if not culled.any():
+        return None
+    closest = float(depth[culled].min())
+    return (
+        f"what it was drawn over is nearer to the camera than the near plane ({camera.near:g}): "
+        f"give --near below {closest:.3g} (the camera's `near`), or move the camera back"
+    )
