@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from conftest import DATA
+from conftest import DATA, sprinkle_close_up
 from sketchrodgs import Camera, GaussianScene, PathNotFoundError, SketchRodGSError, load_scene, synthetic
 from sketchrodgs.baseline import knn_path
 from sketchrodgs.extract import Extraction, extract_rod, load_rod
@@ -436,18 +436,7 @@ def test_a_sprinkle_seen_from_nearer_than_0_2_extracts_with_the_cameras_near_pla
     import dataclasses
 
     donut = load_scene(DATA / "donut.ply")
-    # sprinkle a of tests/data/real_cases/cases.json, stroked in its az180 view 0.3 away
-    cases = json.loads((DATA / "real_cases" / "cases.json").read_text(encoding="utf-8"))["cases"]
-    view = next(c for c in cases if c["name"] == "donut_sprinkle_a")["views"][0]
-    far = Camera.from_dict(view["camera"])
-    stroke = np.asarray(view["stroke"], np.float64)
-    rays = np.column_stack([(stroke - [far.cx, far.cy]) / [far.fx, far.fy], np.ones(len(stroke))]) * 0.3
-    points = rays @ far.camera_to_world[:3, :3].T + far.camera_to_world[:3, 3]
-    forward = far.camera_to_world[:3, 2]
-    target = far.center + 0.3 * forward
-    near_camera = Camera.look_at(
-        target - 0.06 * forward, target, up=-far.camera_to_world[:3, 1], fov_y_deg=50, near=0.01
-    )
+    near_camera, points = sprinkle_close_up(0.06, fov_y_deg=50, near=0.01)
     near_stroke, _ = near_camera.project(points)
     assert 40 < np.linalg.norm(near_stroke[-1] - near_stroke[0]) < 80  # pixels, as a user sees it
     rod = extract_rod(donut, near_camera, near_stroke)

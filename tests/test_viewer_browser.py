@@ -399,23 +399,13 @@ def test_a_sprinkle_seen_close_up_is_sketched(session, tmp_path):
     """The donut is 0.2 across: to sketch a sprinkle (0.005 long) the user comes within 0.1 of it,
     where the reference's near plane (0.2) culled all the sketch looked at, and the viewer said the
     stroke lay on background. The sketch now sees from the browser's near plane (viser's)."""
-    import json
+    from conftest import DATA, sprinkle_close_up
 
-    from conftest import DATA
-
-    donut = load_scene(DATA / "donut.ply")
-    cases = json.loads((DATA / "real_cases" / "cases.json").read_text(encoding="utf-8"))["cases"]
-    view = next(c for c in cases if c["name"] == "donut_sprinkle_a")["views"][0]
-    far = Camera.from_dict(view["camera"])
-    stroke = np.asarray(view["stroke"], np.float64)
-    rays = np.column_stack([(stroke - [far.cx, far.cy]) / [far.fx, far.fy], np.ones(len(stroke))]) * 0.3
-    sprinkle = rays @ far.camera_to_world[:3, :3].T + far.camera_to_world[:3, 3]
-    forward = far.camera_to_world[:3, 2]
-    target = far.center + 0.3 * forward
+    start, sprinkle = sprinkle_close_up(0.06, width=640, height=480, fov_y_deg=50.0)
+    eye, target = start.center, sprinkle.mean(axis=0)
     # the icing around the sprinkle (software WebGL draws the whole donut too slowly to wait for)
+    donut = load_scene(DATA / "donut.ply")
     scene = donut.subset(np.flatnonzero(np.linalg.norm(donut.means - target, axis=1) < 0.03))
-    eye = target - 0.06 * forward
-    start = Camera.look_at(eye, target, up=-far.camera_to_world[:3, 1], width=640, height=480, fov_y_deg=50.0)
     app = ViewerApp(scene, host="127.0.0.1", port=free_port(), up="+z", camera=start, output_dir=tmp_path)
     try:
         tab = Session(app, session.browser)
