@@ -120,6 +120,7 @@ def test_resized_scales_intrinsics():
         ({"near": 0.0}, "near: must be finite and > 0"),
         ({"near": float("nan")}, "near: must be finite and > 0"),
         ({"near": "close"}, "near: expected a number"),
+        ({"near": True}, "near: must be finite and > 0"),
     ],
 )
 def test_degenerate_cameras_are_errors(kwargs, message):

@@ -75,7 +75,7 @@ class Camera:
         if self.fx <= 0 or self.fy <= 0:
             raise CameraError(f"camera focal length must be > 0, got fx={self.fx}, fy={self.fy}")
         try:
-            near = float(self.near)
+            near = float(self.near) if not isinstance(self.near, bool) else math.nan
         except (TypeError, ValueError):
             raise CameraError(f"camera near: expected a number, got {self.near!r}") from None
         if not (math.isfinite(near) and near > 0):
