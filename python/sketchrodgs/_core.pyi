@@ -155,7 +155,7 @@ def rasterize(
     tiles: npt.NDArray[np.bool_] | None = None,
     sh_rows: npt.NDArray[np.uint32] | None = None,
     sort_offsets: npt.NDArray[np.float32] | None = None,
-    near_plane: float = 0.2,
+    near_plane: float = ...,
 ) -> Rendered: ...
 def rasterize_behind(
     means: npt.NDArray[np.float32],
@@ -176,7 +176,7 @@ def rasterize_behind(
     tiles: npt.NDArray[np.bool_] | None = None,
     sh_rows: npt.NDArray[np.uint32] | None = None,
     sort_offsets: npt.NDArray[np.float32] | None = None,
-    near_plane: float = 0.2,
+    near_plane: float = ...,
 ) -> list[Rendered]: ...
 
 @final
@@ -223,7 +223,7 @@ class RetainedRender:
         mode: str = "all",
         sh_rows: npt.NDArray[np.uint32] | None = None,
         sort_offsets: npt.NDArray[np.float32] | None = None,
-        near_plane: float = 0.2,
+        near_plane: float = ...,
     ) -> RetainedRender: ...
     def frame(
         self, means: npt.NDArray[np.float32], scales: npt.NDArray[np.float32], quats: npt.NDArray[np.float32]

@@ -23,7 +23,7 @@ from .jsonfile import read_json
 MAX_IMAGE_SIDE = 16384  # larger images are refused rather than allocated
 RIGID_TOLERANCE = 1e-4  # |R R^T - I| and |det R - 1| allowed in world_to_camera
 # The reference 3DGS rasteriser culls Gaussians at camera z <= 0.2 whatever the scene's units; our
-# cameras default to it (docs/rendering.md, "Near plane").
+# cameras default to it (docs/rendering.md, "Near plane"; rust/sketchrodgs-raster NEAR_PLANE).
 NEAR_PLANE = 0.2
 
 

@@ -208,10 +208,11 @@ class Tab:
         if self.mode != "Sketch":
             return
         if event.phase == "start":
+            camera = self.camera(self._working_width())
+            self._stroke = Stroke(camera) if camera is not None else None  # None: no camera reported yet
+            if self._stroke is None:
+                return
             cam = self.client.camera
-            self._stroke = Stroke(
-                camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, self._working_width(), near=cam.near)
-            )
             # draw the stroke halfway to the orbit centre: in front of what is looked at (viser washes
             # out lines very close to the camera)
             self._stroke_depth = max(2 * cam.near, 0.5 * float(np.linalg.norm(cam.look_at - cam.position)))

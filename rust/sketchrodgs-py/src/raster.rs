@@ -29,7 +29,7 @@ fn raster_err(err: RasterError) -> PyErr {
 /// `sort_offsets` (N, 3) float32: where each Gaussian sorts, from its mean in its own axes.
 /// `near_plane`: Gaussians at camera z at or below it are culled (the reference's 0.2).
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sh_rows = None, sort_offsets = None, near_plane = 0.2))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, background = (0.0, 0.0, 0.0), mode = "all", tiles = None, sh_rows = None, sort_offsets = None, near_plane = sketchrodgs_raster::NEAR_PLANE))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -70,7 +70,7 @@ fn rasterize<'py>(
 /// (`sketchrodgs_raster::rasterize_behind`): `count` `Rendered`, each layer behind the last by
 /// `gap_px` pixels' world size. Scene, camera and `tiles` as for `rasterize`.
 #[pyfunction]
-#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, near, count, gap_px, tiles = None, sh_rows = None, sort_offsets = None, near_plane = 0.2))]
+#[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, near, count, gap_px, tiles = None, sh_rows = None, sort_offsets = None, near_plane = sketchrodgs_raster::NEAR_PLANE))]
 #[allow(clippy::too_many_arguments)]
 fn rasterize_behind<'py>(
     py: Python<'py>,
@@ -225,7 +225,7 @@ pub struct RetainedRender {
 #[pymethods]
 impl RetainedRender {
     #[new]
-    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sh_rows = None, sort_offsets = None, near_plane = 0.2))]
+    #[pyo3(signature = (means, scales, quats, opacities, sh, world_to_camera, width, height, fx, fy, cx, cy, moving, background = (0.0, 0.0, 0.0), mode = "all", sh_rows = None, sort_offsets = None, near_plane = sketchrodgs_raster::NEAR_PLANE))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,

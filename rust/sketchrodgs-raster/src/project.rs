@@ -646,7 +646,7 @@ mod tests {
             cx: 48.0,
             cy: 32.0,
             world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
-            near: 0.2,
+            near: crate::NEAR_PLANE,
         };
         // some behind the camera, off the image, nearly transparent, or NaN
         let inputs: Vec<Input> = (0..1001)

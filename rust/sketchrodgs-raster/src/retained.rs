@@ -295,7 +295,7 @@ mod tests {
             cx: 75.0,
             cy: 50.0,
             world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
-            near: 0.2,
+            near: crate::NEAR_PLANE,
         };
         for mode in [RenderMode::Full, RenderMode::IndexOnly, RenderMode::IndexSolid, RenderMode::Color] {
             let options = RenderOptions { background: [0.3, 0.2, 0.1], mode };

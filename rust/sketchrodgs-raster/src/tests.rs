@@ -17,7 +17,7 @@ fn camera(width: u32, height: u32) -> Camera {
         cx: f64::from(width) / 2.0 + 0.5,
         cy: f64::from(height) / 2.0 + 0.5,
         world_to_camera: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
-        near: 0.2,
+        near: crate::NEAR_PLANE,
     }
 }
 

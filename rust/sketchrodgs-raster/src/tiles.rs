@@ -128,7 +128,7 @@ mod tests {
             cx: 0.5 * width as f64,
             cy: 0.5 * height as f64,
             world_to_camera: identity,
-            near: 0.2,
+            near: crate::NEAR_PLANE,
         }
     }
 
