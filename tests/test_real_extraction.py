@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sketchrodgs import Camera, PathNotFoundError
+from sketchrodgs import Camera
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.realcases import TARGETS, load_cases, run_case, score_case
 
@@ -32,8 +32,8 @@ JITTER = 10
 
 # Measured misses (see the module docstring), as "set/case".
 MISSES = {
-    "unjittered": {"sprinkles/sprinkle_15"},
-    "cross_given": {"heldout/plant_petiole_right", "sprinkles/sprinkle_15"},
+    "unjittered": set(),
+    "cross_given": {"heldout/plant_petiole_right"},
     "cross_estimated": {
         "cases/donut_sprinkle_b",
         "cases/tree_branch_tall",
@@ -47,7 +47,7 @@ MISSES = {
         "heldout/plant_petiole_right",
         "heldout/tree_branch_far_right",
         "heldout/donut_sprinkle_d",
-        *(f"sprinkles/sprinkle_{k:02d}" for k in (7, 10, 11, 12, 13, 14, 16)),
+        *(f"sprinkles/sprinkle_{k:02d}" for k in (7, 10, 11, 12, 13, 14, 15, 16)),
     },
     "radius": {
         "cases/donut_sprinkle_b",
@@ -56,7 +56,7 @@ MISSES = {
         "heldout/plant_petiole_right",
         *(f"sprinkles/sprinkle_{k:02d}" for k in (2, 15, 17)),
     },
-    "end_gap": {"heldout/plant_petiole_right", "heldout/donut_sprinkle_c"},
+    "end_gap": {"heldout/plant_petiole_right"},
     "fold_back": {"heldout/plant_petiole_right", "heldout/donut_sprinkle_d"},
 }
 
@@ -168,20 +168,22 @@ def test_radius_estimate_matches_the_visible_radius(scored, name):
     assert score.radius_spread <= TARGETS["radius_spread"], score.radius_spread
 
 
-def test_a_path_over_a_far_off_gaussian_gives_an_error_not_a_rod_off_the_stroke():
+def test_a_sprinkle_under_a_faint_far_off_gaussian_gets_its_rod_along_the_stroke():
     """Over sprinkle_15 in az270, a faint icing Gaussian 13 R long owns most of the path's pixels
-    and its centre lies 400 px away. The rod must not be built towards it: either the rod lies
-    along the stroke, or extraction says the path is too short."""
+    (the largest weight there, though the pixels show the sprinkle's blue) and its centre lies 400
+    px away. The rod must be the sprinkle's, along the stroke: not built towards that Gaussian (it
+    ran 360 px off once), and not refused as too short for lack of the Gaussians it hides."""
     scenes, cases = load_cases(CASE_FILES["sprinkles"])
     case = next(c for c in cases if c["name"] == "sprinkle_15")
     view = next(v for v in case["views"] if v["name"] == "az270")
     camera = Camera.from_dict(view["camera"], "az270")
     stroke = np.asarray(view["stroke"], np.float64)
-    try:
-        rod = extract_rod(scenes["donut"], camera, stroke, radius=case["radius"])
-    except PathNotFoundError as err:
-        assert "too short" in str(err)
-        return
-    uv, _ = camera.project(rod.polyline.astype(np.float64))
+    rod = extract_rod(scenes["donut"], camera, stroke, radius=case["radius"])
+    uv, z = camera.project(rod.polyline.astype(np.float64))
+    radius_px = case["radius"] * camera.fx / np.median(z)
     off = np.min(np.linalg.norm(uv[:, None] - stroke[None], axis=2), axis=1)
-    assert off.max() < 20, off.max()
+    assert off.max() < 1.5 * radius_px, off.max() / radius_px
+    # it spans the sprinkle: each end of the stroke (drawn 2-6 px past the sprinkle's) lies within
+    # 1.5 R of the rod's
+    ends = np.linalg.norm(stroke[[0, -1]] - uv[[0, -1]], axis=1) / radius_px
+    assert ends.max() < 1.5, ends

@@ -23,7 +23,8 @@ from .camera import Camera
 from .errors import PathNotFoundError, SketchRodGSError
 from .jsonfile import read_json
 from .partial_render import BEHIND_LAYERS, MARGIN_PX, PartialRender, band_tiles
-from .render import RenderResult
+from .render import TILE_SIZE, RenderResult, tile_grid
+from .render import render as render_scene
 from .rod import MAX_ROD_VERTICES
 from .scene import GaussianScene
 from .scene_identity import SceneIdentity
@@ -36,6 +37,9 @@ _SMALLEST = float(np.finfo(np.float32).tiny)  # lengths go to Rust as float32
 _NEAR_PIXEL_PX = 3.0
 _NEAR_PIXEL_RADII = 1.0
 _NEAR_PIXEL_RADII_WIDE = 2.0
+# Path pixels whose Gaussian lies farther than the wider reach get the Gaussian that owns them
+# without it, at most this many times over (`_past_far_owners`).
+_FAR_OWNER_ROUNDS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -453,7 +457,8 @@ def _trace(
         pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        path_ids = _near_the_path(trace.pieces, scene.means, camera, radius)
+        pixels, ids = _past_far_owners(scene, camera, trace.pieces, radius)
+        path_ids = _near_the_path(pixels, ids, scene.means, camera, radius)
         path_ids = _forward_only(path_ids, scene.means, camera, trace.clean_stroke, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
         # the zigzag before the chain is resampled by arc length.
@@ -508,26 +513,76 @@ def _on_screen(camera: Camera, points: np.ndarray, radius: float) -> tuple[np.nd
     return uv, z, radius * camera.fx / np.maximum(z, 1e-12)
 
 
-def _near_the_path(pieces: list[_core.TracePiece], means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
-    """The Gaussians along the path in order, one visit each, leaving out those whose centre
-    projects more than R (3 px at least) from every pixel of the path: a big Gaussian of what the
-    part touches (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel at
-    the part's edge while its centre lies to the side, and would hook the rod's end towards it. A
+def _far_off(
+    pixels: np.ndarray, ids: np.ndarray, means: np.ndarray, camera: Camera, radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per Gaussian of `ids`, how far its centre projects from the nearest of `pixels`, in pixels
+    (infinite behind the camera), and R in pixels at its depth."""
+    uv, z, radius_px = _on_screen(camera, means[ids], radius)
+    off_path, _ = cKDTree(pixels + 0.5).query(np.where(np.isfinite(uv), uv, -1e9))
+    return np.where(z > 0, off_path, np.inf), radius_px
+
+
+def _past_far_owners(
+    scene: GaussianScene, camera: Camera, pieces: list[_core.TracePiece], radius: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The path's pixels (P, 2) and their Gaussians (P,), where a pixel's Gaussian lies far off (its
+    centre more than 2 R from every pixel of the path) replaced by the Gaussian that owns that
+    pixel without it, where that one lies at the part's depth. K is the Gaussian of largest weight:
+    over a sprinkle, a faint icing Gaussian 10 R long, its centre 100 px away, can outweigh each of
+    the sprinkle's Gaussians behind it, though the pixel shows the sprinkle's blue; the rod then
+    missed the sprinkle's upper half (docs/extraction.md, "Gaussians the part hides behind a faint
+    one"). At the part's depth: within the depth gap (3 R), plus the lateral distance as in the
+    depth chain, of the Gaussian of the nearest pixel along the path whose own is not far off: a
+    leaf's Gaussian is far off too, and what it hides is often deeper."""
+    pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
+    ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
+    for _ in range(_FAR_OWNER_ROUNDS):
+        shown = np.unique(ids)
+        off_path, radius_px = _far_off(pixels, shown, scene.means, camera, radius)
+        far = shown[off_path > _NEAR_PIXEL_RADII_WIDE * radius_px]
+        owned = np.isin(ids, far)
+        at = np.flatnonzero(owned)
+        kept = np.flatnonzero(~owned)
+        if len(at) < 3 or len(kept) == 0:
+            break
+        tiles = np.zeros(tile_grid(camera), bool)
+        tiles[pixels[at, 1] // TILE_SIZE, pixels[at, 0] // TILE_SIZE] = True
+        opacities = scene.opacities.copy()
+        opacities[far] = 0.0
+        without = render_scene(scene.replace(opacities=opacities), camera, outputs=("index",), tiles=tiles)
+        owner = np.asarray(without.index)[pixels[at, 1], pixels[at, 0]].astype(np.int64)
+        # the nearest pixel along the path with a Gaussian not far off
+        j = np.clip(np.searchsorted(kept, at), 1, max(len(kept) - 1, 1)) if len(kept) > 1 else np.zeros_like(at)
+        if len(kept) > 1:
+            j = np.where(at - kept[j - 1] <= kept[j] - at, j - 1, j)
+        reference = kept[j]
+        _, z_owner = camera.project(scene.means[np.maximum(owner, 0)].astype(np.float64))
+        _, z_part = camera.project(scene.means[ids[reference]].astype(np.float64))
+        lateral = np.linalg.norm(pixels[at] - pixels[reference], axis=1) * z_part / camera.fx
+        same_depth = (owner >= 0) & (np.abs(z_owner - z_part) <= 3 * radius + lateral)
+        if not same_depth.any():
+            break
+        ids[at[same_depth]] = owner[same_depth]
+    return pixels, ids
+
+
+def _near_the_path(pixels: np.ndarray, ids: np.ndarray, means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
+    """The Gaussians `ids` of the path's `pixels` in order, one visit each, leaving out those whose
+    centre projects more than R (3 px at least) from every pixel of the path: a big Gaussian of what
+    the part touches (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel
+    at the part's edge while its centre lies to the side, and would hook the rod's end towards it. A
     big Gaussian of the part itself (a flat stand leg is drawn by a few) has its centre on the path,
     though far along it from where the path first met it. Where that keeps fewer than half the
     Gaussians within 2 R (a part of few Gaussians, a sprinkle seen edge-on), those are kept. None
     farther is ever kept: over one sprinkle a faint icing Gaussian 13 R long owned 101 of the path's
     119 pixels, its centre 400 px off, and the rod ran there (docs/extraction.md, "Sprinkles from
     their colour"); too few left makes the rod too short, a clear error."""
-    pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
-    ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     _, first = np.unique(ids, return_index=True)
     ids = ids[np.sort(first)]  # first visit of each Gaussian, in path order
-    uv, z, radius_px = _on_screen(camera, means[ids], radius)
-    off_path, _ = cKDTree(pixels + 0.5).query(np.where(np.isfinite(uv), uv, -1e9))
+    off_path, radius_px = _far_off(pixels, ids, means, camera, radius)
     near, wide = (
-        (z > 0) & (off_path <= np.maximum(_NEAR_PIXEL_PX, k * radius_px))
-        for k in (_NEAR_PIXEL_RADII, _NEAR_PIXEL_RADII_WIDE)
+        off_path <= np.maximum(_NEAR_PIXEL_PX, k * radius_px) for k in (_NEAR_PIXEL_RADII, _NEAR_PIXEL_RADII_WIDE)
     )
     if near.sum() < max(3, 0.5 * wide.sum()):
         near = wide
