@@ -54,7 +54,7 @@ MISSES = {
         "cases/guitar_stand_leg_left",
         "cases/guitar_stand_leg_right",
         "heldout/plant_petiole_right",
-        *(f"sprinkles/sprinkle_{k:02d}" for k in (2, 15, 17)),
+        *(f"sprinkles/sprinkle_{k:02d}" for k in (15, 17)),
     },
     "end_gap": {"heldout/plant_petiole_right"},
     "fold_back": {"heldout/plant_petiole_right", "heldout/donut_sprinkle_d"},
@@ -187,3 +187,17 @@ def test_a_sprinkle_under_a_faint_far_off_gaussian_gets_its_rod_along_the_stroke
     # 1.5 R of the rod's
     ends = np.linalg.norm(stroke[[0, -1]] - uv[[0, -1]], axis=1) / radius_px
     assert ends.max() < 1.5, ends
+
+
+def test_a_branch_in_front_of_the_trunk_estimates_its_radius_from_its_silhouette():
+    """A stub branch of the tree seen in front of the trunk (0.24 behind it), stroked along its
+    upper edge (not a case: drawn by hand on 2026-12-05). Its baked shading changes across it, so
+    by colour it measured half its width, and the colour rule took that (R estimated at 0.50 of
+    its visible half-width, 10-13 px: 0.015 at its depth). Its walks end on the trunk far behind,
+    its silhouette as much as the background is, so the plain width stands."""
+    scenes, cases = load_cases(CASE_FILES["cases"])
+    view = next(v for c in cases for v in c["views"] if v["camera"].get("name") == "tree_az000_el10")
+    camera = Camera.from_dict(view["camera"], "tree_az000_el10")
+    stroke = np.array([[548, 403], [535, 412], [520, 422], [505, 434], [492, 446]], np.float64)
+    rod = extract_rod(scenes["tree"], camera, stroke)
+    assert TARGETS["radius_low"] <= rod.radius / 0.015 <= TARGETS["radius_high"], rod.radius

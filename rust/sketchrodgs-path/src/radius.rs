@@ -34,9 +34,12 @@ const COLOUR_SPREADS: f32 = 4.0;
 const COLOUR_RATIO: f32 = 2.0;
 const COLOUR_OFF_LEAST: f32 = 0.2;
 /// The colour widths are not taken where at least this share of the plain walks end on both sides
-/// where nothing is shown: the part is outlined against the background, and its plain widths are
+/// where nothing is shown, or on a surface more than `FAR_GAPS` depth gaps behind: the part is
+/// outlined against the background, or against what lies well behind it, and its plain widths are
 /// its silhouette's. A tree branch whose baked shading changes across it measured 2.3 x narrower by
-/// colour (0.52 R) where 31 of its 46 walks were outlined; a sprinkle on the icing has none.
+/// colour (0.52 R) where 31 of its 46 walks were outlined against the background; a branch in front
+/// of the trunk, 0.5 x where its walks end on the trunk 0.24 behind; a sprinkle on the icing has
+/// neither.
 const OUTLINED_SHARE: f32 = 0.5;
 
 /// What [`estimate_radius`] found.

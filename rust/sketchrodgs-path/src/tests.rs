@@ -341,7 +341,7 @@ fn the_radius_of_a_rope_lying_on_a_floor_is_told_by_its_colour() {
 }
 
 #[test]
-fn the_radius_of_a_shaded_rope_against_the_background_is_its_silhouettes() {
+fn the_radius_of_a_shaded_rope_against_the_background_or_a_wall_behind_is_its_silhouettes() {
     // A rope 9 px thick (rows 16..=24) against nothing, whose Gaussians' colours change across it
     // (light on top, dark below, as a capture's baked shading): by colour it would measure a few
     // pixels, but every walk ends at its outline on both sides, so the plain width stands. The same
@@ -360,6 +360,10 @@ fn the_radius_of_a_shaded_rope_against_the_background_is_its_silhouettes() {
     let alone = Synthetic::new(80, 40, FOCAL, |_, row| (16..=24).contains(&row).then_some(5.0));
     let radius = radius_with_colours(&alone);
     assert!((radius - 0.225).abs() < 0.02, "R = {radius} (the rope's half-width: 4.5 px at 5 / 100)");
+    // in front of a wall 2.5 behind (a branch before its trunk), its silhouette against the wall
+    let before_a_wall = Synthetic::new(80, 40, FOCAL, |_, row| Some(if (16..=24).contains(&row) { 5.0 } else { 7.5 }));
+    let radius = radius_with_colours(&before_a_wall);
+    assert!((radius - 0.225).abs() < 0.02, "before a wall R = {radius}");
     let on_floor = Synthetic::new(80, 40, FOCAL, |_, _| Some(5.0));
     let radius = radius_with_colours(&on_floor);
     assert!(radius < 0.2, "on the floor the colour tells the rope from it: R = {radius}");

@@ -22,8 +22,8 @@ const FAR_GAPS: f32 = 3.0;
 pub(crate) struct Walks {
     ways: [Vec<f32>; 2],
     pixels: [Vec<usize>; 2],
-    /// Per way, whether it first failed where nothing is shown (or at the image's edge): there the
-    /// part's silhouette bounds its width.
+    /// Per way, whether it first failed where nothing is shown (or at the image's edge), or on a
+    /// surface more than `FAR_GAPS` behind: there the part's silhouette bounds its width.
     at_silhouette: [bool; 2],
 }
 
@@ -83,12 +83,14 @@ impl Walks {
                     continue;
                 }
                 let z = image.depth(q);
-                if image.covered(q) && z >= low - far && z <= high + far && !off_colour(q) {
+                let in_reach = z >= low - far && z <= high + far;
+                if image.covered(q) && in_reach && !off_colour(q) {
                     walk.push(z);
                     (low, high, misses, *silhouette) = (low.min(z), high.max(z), 0, false);
                 } else {
                     if misses == 0 {
-                        *silhouette = !image.covered(q);
+                        // nothing shown, or a surface far behind: the part's silhouette either way
+                        *silhouette = !image.covered(q) || z > high + far;
                     }
                     walk.push(f32::NAN);
                     misses += 1;
@@ -101,8 +103,8 @@ impl Walks {
         gap
     }
 
-    /// Whether the last walk first failed on both sides where nothing is shown: the part outlined
-    /// against the background there.
+    /// Whether the last walk first failed on both sides where nothing is shown or on a surface far
+    /// behind: the part outlined against the background, or against what lies well behind it.
     pub fn outlined(&self) -> bool {
         self.at_silhouette[0] && self.at_silhouette[1]
     }
