@@ -34,13 +34,15 @@ const COLOUR_SPREADS: f32 = 4.0;
 const COLOUR_RATIO: f32 = 2.0;
 const COLOUR_OFF_LEAST: f32 = 0.2;
 /// The colour widths are not taken where at least this share of the plain walks end on both sides
-/// where nothing is shown, or on a surface more than `FAR_GAPS` depth gaps behind: the part is
-/// outlined against the background, or against what lies well behind it, and its plain widths are
-/// its silhouette's. A tree branch whose baked shading changes across it measured 2.3 x narrower by
-/// colour (0.52 R) where 31 of its 46 walks were outlined against the background; a branch in front
-/// of the trunk, 0.5 x where its walks end on the trunk 0.24 behind; a sprinkle on the icing has
-/// neither.
+/// where nothing is shown, or on a surface more than `OUTLINED_BEHIND_R` plain radii behind: the
+/// part is outlined against the background, or against what lies well behind it, and its plain
+/// widths are its silhouette's. A tree branch whose baked shading changes across it measured 2.3 x
+/// narrower by colour (0.52 R) where 31 of its 46 walks were outlined against the background; a
+/// branch in front of the trunk (23 R behind it), 0.5 x. A sprinkle on the icing has neither: its
+/// walks run over the icing and may end on a surface a few radii behind it, not counted (any
+/// threshold from 3 to 10 R gives the same real-capture numbers).
 const OUTLINED_SHARE: f32 = 0.5;
+const OUTLINED_BEHIND_R: f32 = 6.0;
 
 /// What [`estimate_radius`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -105,8 +107,10 @@ pub fn estimate_radius(
     // the part's colour, where the Gaussians' colours are known: the median at the anchors
     let colour = part_colour(image, &anchors);
     let median_width = |widths: Vec<[f32; 2]>| median(&mut widths.iter().map(|w| w[0]).collect::<Vec<f32>>());
-    let (widths, outlined_share) = half_widths(image, &clean, &anchors, focal, max_px, None);
+    let (widths, behind) = half_widths(image, &clean, &anchors, focal, max_px, None);
     let mut radius = if widths.is_empty() { rough } else { median_width(widths) };
+    let outlined = behind.iter().filter(|&&b| b > OUTLINED_BEHIND_R * radius).count();
+    let outlined_share = outlined as f32 / behind.len().max(1) as f32;
     if let Some(colour) = colour.filter(|_| outlined_share < OUTLINED_SHARE) {
         let (in_colour, _) = half_widths(image, &clean, &anchors, focal, max_px, Some(colour));
         let by_colour = if in_colour.is_empty() { radius } else { median_width(in_colour) };
@@ -118,8 +122,8 @@ pub fn estimate_radius(
 }
 
 /// The half-widths in world units at the samples that have a pixel (walks stopping where the
-/// colour is off `colour`, if given), each with that pixel's depth, and the share of them outlined
-/// against the background on both sides (`Walks::outlined`).
+/// colour is off `colour`, if given), each with that pixel's depth, and for each how far behind
+/// the part its walk's silhouette lies on both sides (`Walks::outlined_behind`).
 fn half_widths(
     image: &IndexImage,
     stroke: &CleanStroke,
@@ -127,22 +131,21 @@ fn half_widths(
     focal: f32,
     max_px: usize,
     colour: Option<([f32; 3], f32)>,
-) -> (Vec<[f32; 2]>, f32) {
+) -> (Vec<[f32; 2]>, Vec<f32>) {
     let mut walks = Walks::default();
-    let mut outlined = 0;
+    let mut behind = Vec::new();
     let widths: Vec<[f32; 2]> = pixels
         .iter()
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
         .map(|(p, &n)| {
             let width = walks.cross_width(image, p, n, focal, max_px, colour);
-            outlined += usize::from(walks.outlined());
+            behind.push(walks.outlined_behind());
             let z = image.depth(p);
             [0.5 * width as f32 * z / focal, z]
         })
         .collect();
-    let share = outlined as f32 / widths.len().max(1) as f32;
-    (widths, share)
+    (widths, behind)
 }
 
 /// The part's colour and how far from it a Gaussian of the part may be: the per-channel median of

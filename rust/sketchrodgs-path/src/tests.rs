@@ -360,10 +360,16 @@ fn the_radius_of_a_shaded_rope_against_the_background_or_a_wall_behind_is_its_si
     let alone = Synthetic::new(80, 40, FOCAL, |_, row| (16..=24).contains(&row).then_some(5.0));
     let radius = radius_with_colours(&alone);
     assert!((radius - 0.225).abs() < 0.02, "R = {radius} (the rope's half-width: 4.5 px at 5 / 100)");
-    // in front of a wall 2.5 behind (a branch before its trunk), its silhouette against the wall
-    let before_a_wall = Synthetic::new(80, 40, FOCAL, |_, row| Some(if (16..=24).contains(&row) { 5.0 } else { 7.5 }));
-    let radius = radius_with_colours(&before_a_wall);
+    // in front of a wall 2.5 behind (11 R: a branch before its trunk), its silhouette against the
+    // wall; a wall 1.3 behind (6 R less a little) ends the walks too (over 3 depth gaps of 8 px,
+    // 1.2), but not as a silhouette: the colour tells
+    let before_a_wall = |behind: f32| {
+        Synthetic::new(80, 40, FOCAL, move |_, row| Some(if (16..=24).contains(&row) { 5.0 } else { 5.0 + behind }))
+    };
+    let radius = radius_with_colours(&before_a_wall(2.5));
     assert!((radius - 0.225).abs() < 0.02, "before a wall R = {radius}");
+    let radius = radius_with_colours(&before_a_wall(1.3));
+    assert!(radius < 0.2, "just before a wall the colour tells: R = {radius}");
     let on_floor = Synthetic::new(80, 40, FOCAL, |_, _| Some(5.0));
     let radius = radius_with_colours(&on_floor);
     assert!(radius < 0.2, "on the floor the colour tells the rope from it: R = {radius}");

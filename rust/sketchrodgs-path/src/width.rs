@@ -22,9 +22,11 @@ const FAR_GAPS: f32 = 3.0;
 pub(crate) struct Walks {
     ways: [Vec<f32>; 2],
     pixels: [Vec<usize>; 2],
-    /// Per way, whether it first failed where nothing is shown (or at the image's edge), or on a
-    /// surface more than `FAR_GAPS` behind: there the part's silhouette bounds its width.
-    at_silhouette: [bool; 2],
+    /// Per way, how far behind the depths walked the walk first failed, where the part's silhouette
+    /// bounds its width there: infinite where nothing is shown (or at the image's edge), the depth
+    /// difference on a surface more than `FAR_GAPS` behind, and negative infinity where it failed
+    /// otherwise (on a surface in front, or off the part's colour).
+    silhouette_behind: [f32; 2],
 }
 
 impl Walks {
@@ -63,16 +65,18 @@ impl Walks {
         let gap = GAP_FLOOR_PX * z0 / focal_px;
         let far = FAR_GAPS * gap;
         for (((walk, pixels), silhouette), sign) in
-            self.ways.iter_mut().zip(&mut self.pixels).zip(&mut self.at_silhouette).zip([1.0_f32, -1.0])
+            self.ways.iter_mut().zip(&mut self.pixels).zip(&mut self.silhouette_behind).zip([1.0_f32, -1.0])
         {
             walk.clear();
             pixels.clear();
-            *silhouette = false;
+            *silhouette = f32::NEG_INFINITY;
             let (mut low, mut high, mut misses) = (z0, z0, 0);
             for k in 1..=max_px {
                 let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
                 let Some(q) = image.pixel_at(x, y) else {
-                    *silhouette |= misses == 0;
+                    if misses == 0 {
+                        *silhouette = f32::INFINITY;
+                    }
                     break;
                 };
                 pixels.push(q);
@@ -86,11 +90,17 @@ impl Walks {
                 let in_reach = z >= low - far && z <= high + far;
                 if image.covered(q) && in_reach && !off_colour(q) {
                     walk.push(z);
-                    (low, high, misses, *silhouette) = (low.min(z), high.max(z), 0, false);
+                    (low, high, misses, *silhouette) = (low.min(z), high.max(z), 0, f32::NEG_INFINITY);
                 } else {
                     if misses == 0 {
                         // nothing shown, or a surface far behind: the part's silhouette either way
-                        *silhouette = !image.covered(q) || z > high + far;
+                        *silhouette = if !image.covered(q) {
+                            f32::INFINITY
+                        } else if z > high + far {
+                            z - high
+                        } else {
+                            f32::NEG_INFINITY
+                        };
                     }
                     walk.push(f32::NAN);
                     misses += 1;
@@ -103,10 +113,11 @@ impl Walks {
         gap
     }
 
-    /// Whether the last walk first failed on both sides where nothing is shown or on a surface far
-    /// behind: the part outlined against the background, or against what lies well behind it.
-    pub fn outlined(&self) -> bool {
-        self.at_silhouette[0] && self.at_silhouette[1]
+    /// How far behind the part the last walk's silhouette lies on its nearer side: infinite where
+    /// nothing is shown on both sides (the part outlined against the background), negative
+    /// infinity where either side is not a silhouette (`silhouette_behind`).
+    pub fn outlined_behind(&self) -> f32 {
+        self.silhouette_behind[0].min(self.silhouette_behind[1])
     }
 
     /// The width of the last walk from a pixel at depth `z0`: the run around it in its depth
