@@ -26,6 +26,9 @@ const HIDDEN_SCORE: f32 = 0.9;
 /// The chain may run behind the front only where that scores this share more than the chain over
 /// the visible surfaces alone.
 const BEHIND_GAIN: f32 = 0.15;
+/// ... and only where, cut to its first and last visible members, it spans this many radii on
+/// screen at least: a shorter path makes a rod too short to extract (Polyline: at least 2 R).
+const BEHIND_SPAN_R: f32 = 2.0;
 /// Depth may change by this much per unit of lateral distance along the stroke between two chain
 /// samples, on top of `3R`. It matters where the chain skips samples (over an occluder): between
 /// neighbouring samples `3R` alone already follows a steeply receding part.
@@ -206,8 +209,13 @@ pub(crate) fn clean_stroke(
             let last = all.iter().rposition(|m| m.1.layer == 0);
             // (at two samples at least: a chain behind seen at one runs behind the part itself,
             // as the floor under a rope lying on it, where the rope measures as wide as the floor)
+            // (and over two radii on screen at least, as short as a rod may be: cut to two
+            // neighbouring samples, a chain behind made a path of one pixel on a sprinkle seen
+            // close up, and the stroke was refused)
             if let (Some(first), Some(last)) = (first, last)
                 && last > first
+                && arc[all[last].0] - arc[all[first].0]
+                    >= BEHIND_SPAN_R * depth_gap / 3.0 * focal_px / all[first].1.depth
             {
                 (chain, behind) = (all[first..=last].to_vec(), true);
             }
