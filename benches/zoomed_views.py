@@ -13,8 +13,8 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from _table import print_table
 
+from _table import print_table
 from sketchrodgs import Camera, PathNotFoundError, realcases
 from sketchrodgs.consistency import polyline_agreement
 from sketchrodgs.extract import extract_rod
