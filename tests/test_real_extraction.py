@@ -168,17 +168,26 @@ def test_radius_estimate_matches_the_visible_radius(scored, name):
     assert score.radius_spread <= TARGETS["radius_spread"], score.radius_spread
 
 
+def _case_view(group: str, name: str, view_name: str):
+    """The scene, the case, the camera and the stroke of one view of a real case."""
+    scenes, cases = load_cases(CASE_FILES[group])
+    case = next(c for c in cases if c["name"] == name)
+    view = next(v for v in case["views"] if v["name"] == view_name)
+    return (
+        scenes[case["scene"]],
+        case,
+        Camera.from_dict(view["camera"], view_name),
+        np.asarray(view["stroke"], np.float64),
+    )
+
+
 def test_a_sprinkle_under_a_faint_far_off_gaussian_gets_its_rod_along_the_stroke():
     """Over sprinkle_15 in az270, a faint icing Gaussian 13 R long owns most of the path's pixels
     (the largest weight there, though the pixels show the sprinkle's blue) and its centre lies 400
     px away. The rod must be the sprinkle's, along the stroke: not built towards that Gaussian (it
     ran 360 px off once), and not refused as too short for lack of the Gaussians it hides."""
-    scenes, cases = load_cases(CASE_FILES["sprinkles"])
-    case = next(c for c in cases if c["name"] == "sprinkle_15")
-    view = next(v for v in case["views"] if v["name"] == "az270")
-    camera = Camera.from_dict(view["camera"], "az270")
-    stroke = np.asarray(view["stroke"], np.float64)
-    rod = extract_rod(scenes["donut"], camera, stroke, radius=case["radius"])
+    scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_15", "az270")
+    rod = extract_rod(scene, camera, stroke, radius=case["radius"])
     uv, z = camera.project(rod.polyline.astype(np.float64))
     radius_px = case["radius"] * camera.fx / np.median(z)
     off = np.min(np.linalg.norm(uv[:, None] - stroke[None], axis=2), axis=1)
@@ -211,12 +220,8 @@ def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
     is the far view's, within the issue's targets."""
     from sketchrodgs.consistency import polyline_agreement
 
-    scenes, cases = load_cases(CASE_FILES["heldout"])
-    case = next(c for c in cases if c["name"] == "donut_sprinkle_c")
-    view = next(v for v in case["views"] if v["name"] == "az180")
-    far = Camera.from_dict(view["camera"], "az180")
-    stroke = np.asarray(view["stroke"], np.float64)
-    far_rod = extract_rod(scenes["donut"], far, stroke, radius=case["radius"])
+    scene, case, far, stroke = _case_view("heldout", "donut_sprinkle_c", "az180")
+    far_rod = extract_rod(scene, far, stroke, radius=case["radius"])
     depth = float(np.median(far.project(far_rod.polyline.astype(np.float64))[1]))
     to_world = np.asarray(far.camera_to_world, np.float64)
     rays = np.column_stack([(stroke - [far.cx, far.cy]) / [far.fx, far.fy], np.ones(len(stroke))]) * depth
@@ -224,7 +229,7 @@ def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
     target = np.asarray(far.center) + depth * to_world[:3, 2]
     close = Camera.look_at(target - 0.06 * to_world[:3, 2], target, up=-to_world[:3, 1], fov_y_deg=50, near=0.01)
     close_stroke, _ = close.project(points)
-    rod = extract_rod(scenes["donut"], close, close_stroke)
+    rod = extract_rod(scene, close, close_stroke)
     agreement = polyline_agreement(far_rod.polyline, rod.polyline, case["radius"])
     assert agreement["mean"] <= TARGETS["cross_mean"] and agreement["max"] <= TARGETS["cross_max"], agreement
     assert TARGETS["radius_low"] <= rod.radius / case["radius"] <= TARGETS["radius_high"], rod.radius
