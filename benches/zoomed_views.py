@@ -19,6 +19,7 @@ from sketchrodgs import Camera, PathNotFoundError, realcases
 from sketchrodgs.consistency import polyline_agreement
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.render import SOLID_OUTPUTS, render
+from sketchrodgs.viewer.camera import unproject
 
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "real_cases"
 
@@ -26,11 +27,9 @@ DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "real_cases"
 def zoomed(camera: Camera, stroke: np.ndarray, depth: float, fraction: float) -> tuple[Camera, np.ndarray]:
     """`camera` moved towards the stroke's middle (at `depth`) to `fraction` of the distance, and the
     stroke as it then sees the same points."""
-    to_world = np.asarray(camera.camera_to_world, np.float64)
-    rays = np.column_stack([(stroke - [camera.cx, camera.cy]) / [camera.fx, camera.fy], np.ones(len(stroke))])
-    points = (rays * depth) @ to_world[:3, :3].T + to_world[:3, 3]
-    moved = to_world.copy()
-    moved[:3, 3] += (1 - fraction) * (points[len(points) // 2] - to_world[:3, 3])
+    points = unproject(stroke, camera, depth)
+    moved = camera.camera_to_world.copy()
+    moved[:3, 3] += (1 - fraction) * (points[len(points) // 2] - moved[:3, 3])
     near = min(camera.near, 0.5 * fraction * depth)
     closer = Camera(
         camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy, np.linalg.inv(moved), "zoomed", near

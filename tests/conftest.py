@@ -49,19 +49,25 @@ def outputs_per_thread_count(code: str, counts: tuple[int, ...]) -> set[str]:
     return outputs
 
 
+def close_up(
+    far: Camera, stroke: np.ndarray, depth: float, distance: float, **look_at: object
+) -> tuple[Camera, np.ndarray]:
+    """A camera `distance` from what `far` sees at camera depth `depth` on its axis, looking as `far`
+    does, and `stroke` (drawn in `far`) as 3D points at that depth. `look_at` goes to
+    `Camera.look_at` (width, height, fov_y_deg, near)."""
+    from sketchrodgs.viewer.camera import unproject
+
+    forward = far.camera_to_world[:3, 2]
+    target = far.center + depth * forward
+    camera = Camera.look_at(target - distance * forward, target, up=-far.camera_to_world[:3, 1], **look_at)
+    return camera, unproject(stroke, far, depth)
+
+
 def sprinkle_close_up(distance: float, **look_at: object) -> tuple[Camera, np.ndarray]:
-    """A camera `distance` from the donut's sprinkle a (tests/data/real_cases/cases.json), looking
-    at it as its az180 view does, and the sprinkle's stroke as 3D points (that view's stroke at its
-    depth, 0.3). `look_at` goes to `Camera.look_at` (width, height, fov_y_deg, near)."""
+    """`close_up` of the donut's sprinkle a (tests/data/real_cases/cases.json) as its az180 view
+    sees it, the stroke at its depth, 0.3."""
     import json
 
     cases = json.loads((DATA / "real_cases" / "cases.json").read_text(encoding="utf-8"))["cases"]
     view = next(c for c in cases if c["name"] == "donut_sprinkle_a")["views"][0]
-    far = Camera.from_dict(view["camera"])
-    stroke = np.asarray(view["stroke"], np.float64)
-    rays = np.column_stack([(stroke - [far.cx, far.cy]) / [far.fx, far.fy], np.ones(len(stroke))]) * 0.3
-    points = rays @ far.camera_to_world[:3, :3].T + far.camera_to_world[:3, 3]
-    forward = far.camera_to_world[:3, 2]
-    target = far.center + 0.3 * forward
-    camera = Camera.look_at(target - distance * forward, target, up=-far.camera_to_world[:3, 1], **look_at)
-    return camera, points
+    return close_up(Camera.from_dict(view["camera"]), np.asarray(view["stroke"], np.float64), 0.3, distance, **look_at)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import close_up
 from sketchrodgs import Camera
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.realcases import TARGETS, load_cases, run_case, score_case
@@ -223,11 +224,7 @@ def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
     scene, case, far, stroke = _case_view("heldout", "donut_sprinkle_c", "az180")
     far_rod = extract_rod(scene, far, stroke, radius=case["radius"])
     depth = float(np.median(far.project(far_rod.polyline.astype(np.float64))[1]))
-    to_world = np.asarray(far.camera_to_world, np.float64)
-    rays = np.column_stack([(stroke - [far.cx, far.cy]) / [far.fx, far.fy], np.ones(len(stroke))]) * depth
-    points = rays @ to_world[:3, :3].T + to_world[:3, 3]
-    target = np.asarray(far.center) + depth * to_world[:3, 2]
-    close = Camera.look_at(target - 0.06 * to_world[:3, 2], target, up=-to_world[:3, 1], fov_y_deg=50, near=0.01)
+    close, points = close_up(far, stroke, depth, 0.06, fov_y_deg=50, near=0.01)
     close_stroke, _ = close.project(points)
     rod = extract_rod(scene, close, close_stroke)
     agreement = polyline_agreement(far_rod.polyline, rod.polyline, case["radius"])

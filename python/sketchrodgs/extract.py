@@ -553,10 +553,9 @@ def _past_far_owners(
         without = render_scene(scene.replace(opacities=opacities), camera, outputs=("index",), tiles=tiles)
         owner = np.asarray(without.index)[pixels[at, 1], pixels[at, 0]].astype(np.int64)
         # the nearest pixel along the path with a Gaussian not far off
-        j = np.clip(np.searchsorted(kept, at), 1, max(len(kept) - 1, 1)) if len(kept) > 1 else np.zeros_like(at)
-        if len(kept) > 1:
-            j = np.where(at - kept[j - 1] <= kept[j] - at, j - 1, j)
-        reference = kept[j]
+        after = np.searchsorted(kept, at)
+        before, after = kept[np.maximum(after - 1, 0)], kept[np.minimum(after, len(kept) - 1)]
+        reference = np.where(np.abs(at - before) <= np.abs(after - at), before, after)
         _, z_owner = camera.project(scene.means[np.maximum(owner, 0)].astype(np.float64))
         _, z_part = camera.project(scene.means[ids[reference]].astype(np.float64))
         lateral = np.linalg.norm(pixels[at] - pixels[reference], axis=1) * z_part / camera.fx

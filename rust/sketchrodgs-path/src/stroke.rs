@@ -215,7 +215,7 @@ pub(crate) fn clean_stroke(
             if let (Some(first), Some(last)) = (first, last)
                 && last > first
                 && arc[all[last].0] - arc[all[first].0]
-                    >= BEHIND_SPAN_R * depth_gap / 3.0 * focal_px / all[first].1.depth
+                    >= on_screen(BEHIND_SPAN_R, depth_gap, focal_px, all[first].1.depth)
             {
                 (chain, behind) = (all[first..=last].to_vec(), true);
             }
@@ -288,6 +288,11 @@ fn cut_occluder_ends(chain: &mut Vec<(usize, Candidate)>, arc: &[f32], depth_gap
     chain.reverse();
 }
 
+/// `radii` radii in pixels at `depth` (the depth gap is 3 R).
+fn on_screen(radii: f32, depth_gap: f32, focal_px: f32, depth: f32) -> f32 {
+    radii * depth_gap / 3.0 * focal_px / depth
+}
+
 /// Least-squares slope of `depth` over the distance of `at` from `origin` (px along the stroke);
 /// None for fewer than 3 points.
 fn depth_slope(at: &[f32], depth: &[f32], origin: f32) -> Option<f32> {
@@ -355,7 +360,7 @@ fn cut_turn_tail_signed(
     // the slopes are taken over the run's length on both sides (`TURN_WINDOW_R` radii at least, in
     // pixels at the apex's depth; the gap is 3 R): a bump of a few radii in a receding part is not
     // a turn
-    let window = (TURN_WINDOW_R * depth_gap / 3.0 * focal_px / chain[apex].1.depth).max(run_span);
+    let window = on_screen(TURN_WINDOW_R, depth_gap, focal_px, chain[apex].1.depth).max(run_span);
     let side = |range: std::ops::Range<usize>| {
         let keep: Vec<usize> = range.filter(|&k| (at[k] - at[apex]).abs() <= window).collect();
         let xs: Vec<f32> = keep.iter().map(|&k| at[k]).collect();
@@ -431,7 +436,7 @@ fn cut_short_front_tail(
     }
     let end = &chain[n - 1];
     // R in pixels at the end's depth (the gap is 3 R)
-    let reach = (OCCLUDER_SHORT_R * depth_gap / 3.0 * focal_px / end.1.depth).min(chain_arc * OCCLUDER_BROAD_SHARE);
+    let reach = on_screen(OCCLUDER_SHORT_R, depth_gap, focal_px, end.1.depth).min(chain_arc * OCCLUDER_BROAD_SHARE);
     // the nearest depth of the run from member k to the end, kept as k moves inwards
     let mut nearest = end.1.depth;
     for k in (1..n - 1).rev() {
