@@ -39,7 +39,6 @@ MISSES = {
         "cases/donut_sprinkle_b",
         "cases/tree_branch_tall",
         "heldout/plant_petiole_right",
-        "sprinkles/sprinkle_17",
     },
     "jitter": {
         "cases/plant_side_stem_long",
@@ -48,7 +47,7 @@ MISSES = {
         "heldout/plant_petiole_right",
         "heldout/tree_branch_far_right",
         "heldout/donut_sprinkle_d",
-        *(f"sprinkles/sprinkle_{k:02d}" for k in (7, 10, 11, 12, 13, 14, 15, 16)),
+        *(f"sprinkles/sprinkle_{k:02d}" for k in (10, 11, 12, 13, 16)),
     },
     "radius": {
         "cases/donut_sprinkle_b",
@@ -197,6 +196,25 @@ def test_a_sprinkle_under_a_faint_far_off_gaussian_gets_its_rod_along_the_stroke
     # 1.5 R of the rod's
     ends = np.linalg.norm(stroke[[0, -1]] - uv[[0, -1]], axis=1) / radius_px
     assert ends.max() < 1.5, ends
+
+
+def test_a_sprinkle_stroked_over_the_icing_beside_it_keeps_its_rod_on_the_sprinkle():
+    """sprinkle_14 in az000, stroked as the jitter set's fourth stroke (up to 8 px off, running
+    along the sprinkle's upper edge and past its right end over the icing). The icing lies at the
+    sprinkle's depth and its Gaussians are large, so by depth, width and length the path followed
+    the stroke onto it, and the rod ran 4.7 R off the rod of the stroke as drawn. The icing's pink
+    keeps the path on the sprinkle's blue (docs/extraction.md, "A part lying on a surface")."""
+    from sketchrodgs.consistency import polyline_agreement
+
+    scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_14", "az000")
+    drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
+    jittered = np.array(
+        [[868.5, 330.8], [858.2, 309.1], [849.8, 295.6], [811.3, 278.5], [785.3, 273.8], [776.5, 284.4],
+         [765.1, 277.0], [727.8, 268.9]]
+    )  # fmt: skip
+    rod = extract_rod(scene, camera, jittered, radius=case["radius"])
+    agreement = polyline_agreement(drawn.polyline, rod.polyline, case["radius"])
+    assert agreement["max"] <= TARGETS["jitter_max"], agreement
 
 
 def test_a_branch_in_front_of_the_trunk_estimates_its_radius_from_its_silhouette():

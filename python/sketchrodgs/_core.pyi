@@ -32,6 +32,7 @@ def trace_stroke(
     rendered: npt.NDArray[np.bool_] | None = None,
     missed: npt.NDArray[np.bool_] | None = None,
     behind: tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]] | None = None,
+    colours: tuple[npt.NDArray[np.uint32], npt.NDArray[np.float32]] | None = None,
 ) -> Trace: ...
 
 @final
@@ -59,6 +60,8 @@ class Trace:
     def coverage(self) -> float: ...
     @property
     def wants_behind(self) -> bool: ...
+    @property
+    def colours(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None: ...
 
 def forward_along_stroke(
     points: npt.NDArray[np.float32], radius_px: npt.NDArray[np.float32], stroke: npt.NDArray[np.float32]

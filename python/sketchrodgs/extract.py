@@ -426,10 +426,25 @@ def _trace(
     region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed, "behind": partial.behind_arrays()}
     clock = time.perf_counter()
     estimated, estimate_wants = radius is None, False
+    # The Gaussians' colours near the stroke: the radius estimate's width walks read them (within
+    # the band and 1/8 of the image's larger side each way, radius.rs) and the path's colour term
+    # (within the band and 5 R across the stroke, search.rs), docs/extraction.md, "A part lying on a
+    # surface".
+    shown = [index, *(region["behind"][:1] if region["behind"] else [])]
+    height, width = index.shape
+    band = max(band_px or 0.0, 0.01 * width, 2.0)
+    if radius is None:
+        reach = band + max(width, height) / 8 + 2
+    else:
+        pixels = np.floor(work).astype(np.int64)
+        pixels = pixels[(pixels >= 0).all(axis=1) & (pixels[:, 0] < width) & (pixels[:, 1] < height)]
+        under = depth[pixels[:, 1], pixels[:, 0]]
+        under = under[np.isfinite(under) & (under > 0)]
+        radius_px = radius * focal / float(np.min(under)) if len(under) else 0.25 * max(width, height)
+        reach = band + min(5 * radius_px, max(width, height) / 8) + 2
+    colours = _shown_colours(scene, shown, work, reach)
     if radius is None:
         try:
-            shown = [index, *(region["behind"][:1] if region["behind"] else [])]
-            colours = _shown_colours(scene, shown, work, band_px)
             radius, estimate_wants = _core.estimate_radius(
                 index, depth, opacity, work, focal, float(band_px or 0.0), **region, colours=colours
             )
@@ -450,6 +465,7 @@ def _trace(
                 float(band_px or 0.0),
                 focal_px=focal,
                 alpha=opacity,
+                colours=colours,
                 **region,
             )
         except PathNotFoundError as err:
@@ -459,6 +475,7 @@ def _trace(
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
         pixels, ids = _past_far_owners(scene, camera, trace.pieces, radius)
         path_ids = _near_the_path(pixels, ids, scene.means, camera, radius)
+        path_ids = _of_the_part(path_ids, scene, trace.colours)
         path_ids = _forward_only(path_ids, scene.means, camera, trace.clean_stroke, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
         # the zigzag before the chain is resampled by arc length.
@@ -486,17 +503,13 @@ def _with_near_plane_hint(message: str, scene: GaussianScene, camera: Camera, st
 
 
 def _shown_colours(
-    scene: GaussianScene, index_images: list[np.ndarray], stroke: np.ndarray, band_px: float | None
+    scene: GaussianScene, index_images: list[np.ndarray], stroke: np.ndarray, reach: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The colours (SH DC term) of the Gaussians that `index_images` show near `stroke`: (ids
-    ascending, rgb). The radius estimate reads the colours of the Gaussians under the stroke
-    (docs/extraction.md, "A part lying on a surface"), and its width walks start on a surface
-    within the band of a stroke sample and go at most 1/8 of the image's larger side each way
-    (radius.rs), so the images are read within that of the stroke's bounding box only. The ids come
-    from a mask over all N rows, not a sort of the pixels: with a whole 960x540 render given at
-    2.27 M Gaussians, np.unique over the image took 70 ms."""
+    """The colours (SH DC term) of the Gaussians that `index_images` show within `reach` pixels of
+    `stroke`'s bounding box: (ids ascending, rgb). The ids come from a mask over all N rows, not a
+    sort of the pixels: with a whole 960x540 render given at 2.27 M Gaussians, np.unique over the
+    image took 70 ms."""
     height, width = index_images[0].shape
-    reach = max(band_px or 0.0, 0.01 * width, 2.0) + max(width, height) / 8 + 2
     low = np.clip(np.floor(stroke.min(axis=0) - reach), 0, [width, height]).astype(int)
     high = np.clip(np.ceil(stroke.max(axis=0) + reach) + 1, 0, [width, height]).astype(int)
     shown = np.zeros(len(scene), dtype=bool)
@@ -586,6 +599,19 @@ def _near_the_path(pixels: np.ndarray, ids: np.ndarray, means: np.ndarray, camer
     if near.sum() < max(3, 0.5 * wide.sum()):
         near = wide
     return ids[near]
+
+
+def _of_the_part(ids: np.ndarray, scene: GaussianScene, colours: tuple | None) -> np.ndarray:
+    """The path's Gaussians `ids` less those of the colour of the surface the part lies on, where
+    the trace found one (`Trace.colours`: the part's colour and the surface's): the path keeps to the
+    part's pixels, but a large surface Gaussian can own some at its edge. All are kept where fewer
+    than 2 would be left."""
+    if colours is None or len(ids) == 0:
+        return ids
+    part, surround = (np.asarray(c, np.float32) for c in colours)
+    rgb = scene.colors_of(ids)
+    keep = np.linalg.norm(rgb - part, axis=1) <= np.linalg.norm(rgb - surround, axis=1)
+    return ids[keep] if keep.sum() >= 2 else ids
 
 
 def _forward_only(ids: np.ndarray, means: np.ndarray, camera: Camera, stroke: np.ndarray, radius: float) -> np.ndarray:

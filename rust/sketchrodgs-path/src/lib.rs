@@ -30,7 +30,7 @@ mod width;
 
 pub use order::forward_along_stroke;
 pub use radius::{RadiusEstimate, estimate_radius};
-pub use search::{Piece, PieceEnd, Trace, trace_stroke};
+pub use search::{Piece, PieceEnd, SurfaceColours, Trace, trace_stroke};
 
 /// Things that make a trace impossible. Each names what was wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -168,6 +168,11 @@ impl<'a> IndexImage<'a> {
     pub(crate) fn colour(&self, p: usize) -> Option<[f32; 3]> {
         let colours = self.colours?;
         colours.ids.binary_search(&self.gaussian(p)?).ok().map(|k| colours.rgb[k])
+    }
+
+    /// Whether the Gaussians' colours are known.
+    pub(crate) fn has_colours(&self) -> bool {
+        self.colours.is_some()
     }
 
     /// Whether layers behind the image are known.

@@ -6,7 +6,7 @@ use std::collections::{BinaryHeap, HashSet};
 
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::Walks;
+use crate::width::{WIDE_CAP, Walks, colour_distance, median};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// How a piece of the path ended.
@@ -45,6 +45,23 @@ pub struct Trace {
     /// The image came without the layers behind it, and with them the trace might run elsewhere
     /// (behind what lies in front of the object): give them and trace again.
     pub wants_behind: bool,
+    /// Where the part lies on a surface of another colour at its depth: the two colours, which the
+    /// path's cost told apart (`surface_colours`).
+    pub colours: Option<SurfaceColours>,
+}
+
+/// The colours of a part lying on a surface at its own depth and of that surface, RGB.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfaceColours {
+    pub part: [f32; 3],
+    pub surround: [f32; 3],
+}
+
+impl SurfaceColours {
+    /// Whether `colour` is nearer the surround's than the part's.
+    pub fn is_surround(&self, colour: [f32; 3]) -> bool {
+        colour_distance(colour, self.surround) < colour_distance(colour, self.part)
+    }
 }
 
 /// Find the path under `stroke` (continuous pixel coordinates) over `image`.
@@ -80,7 +97,8 @@ pub fn trace_stroke(
     let mut start = endpoint(0)?;
     let goal = endpoint(last)?;
 
-    let mut search = Search::new(image, centres, &band, &clean, &params, gap);
+    let colours = surface_colours(image, &band, &clean, &params, gap);
+    let mut search = Search::new(image, centres, &band, &clean, &params, gap, colours.as_ref());
     let mut covered = CoverMask::new(image.width, image.height, params.cover_px);
     let mut pieces = Vec::new();
     let mut start_sample = 0; // the chain sample each piece starts from: it moves on every time
@@ -109,7 +127,7 @@ pub fn trace_stroke(
     }
     let coverage = covered.coverage(image, stroke);
     let on_chain = clean.points.iter().zip(&clean.anchor).filter(|(_, a)| a.is_some()).map(|(p, _)| *p).collect();
-    Ok(Trace { pieces, clean_stroke: on_chain, coverage, wants_behind: clean.wants_behind })
+    Ok(Trace { pieces, clean_stroke: on_chain, coverage, wants_behind: clean.wants_behind, colours })
 }
 
 /// The node of the nearest band pixel within `radius` of `point` that belongs to the stroke near
@@ -199,7 +217,8 @@ struct Search<'a> {
     centre: Vec<[f64; 3]>,
     /// The camera z of each node's pixel (read once: the image's reads go through its layers).
     depth: Vec<f32>,
-    /// Extra cost per pixel step onto each node for a surface much wider than the part.
+    /// Extra cost per pixel step onto each node for a surface much wider than the part, or of the
+    /// colour of the surface the part lies on.
     wide: Vec<f64>,
     /// No step between pixels whose depths differ by more (`crate::depth_gap`).
     gap: f32,
@@ -216,11 +235,20 @@ impl<'a> Search<'a> {
         stroke: &CleanStroke,
         params: &'a TraceParams,
         gap: f32,
+        colours: Option<&SurfaceColours>,
     ) -> Self {
         let centre = band.pixel.iter().map(|&p| centres[image.id_at(p as usize) as usize].map(f64::from)).collect();
         let depth: Vec<f32> = band.pixel.iter().map(|&p| image.depth(p as usize)).collect();
         let n = band.len();
-        let wide = wide_penalty(image, band, stroke, params, &depth);
+        let mut wide = wide_penalty(image, band, stroke, params, &depth);
+        // the surface a part lies on measures as wide as the part itself: its colour tells
+        if let Some(colours) = colours {
+            for ((w, &p), &z) in wide.iter_mut().zip(&band.pixel).zip(&depth) {
+                if image.colour(p as usize).is_some_and(|c| colours.is_surround(c)) {
+                    *w = w.max(SURROUND_COST * f64::from(z / params.focal_px));
+                }
+            }
+        }
         Self {
             image,
             band,
@@ -353,6 +381,108 @@ fn wide_penalty(
     (0..band.len()).map(|node| WIDE_WEIGHT * f64::from(excess[node]) * f64::from(depth[node] / focal)).collect()
 }
 
+/// A part lying on a surface at its own depth (a sprinkle on icing, a rope on a floor) has no depth
+/// edge beside it, and the surface measures as wide as the part there: only colour tells them
+/// apart (docs/extraction.md, "A part lying on a surface"). The surface is what lies
+/// `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the stroke on both sides, where
+/// `ON_SURFACE_SHARE` of those pixels lie at the part's depth (within the depth gap and the lateral
+/// distance: the surface may slope away).
+const SURROUND_FROM_R: f32 = 3.0;
+const SURROUND_TO_R: f32 = 5.0;
+const ON_SURFACE_SHARE: f32 = 0.5;
+/// The two colours (`two_colours`) must lie this far apart (RGB, Euclidean).
+const PART_APART: f32 = 0.25;
+const TWO_COLOUR_ROUNDS: usize = 4;
+/// Extra cost per pixel step onto a pixel nearer the surround's colour than the part's, in units of
+/// a pixel's world size: four times a surface `WIDE_CAP` radii too wide. From once to eight times
+/// the sprinkles' numbers are the same (8 misses); without it, 10.
+const SURROUND_COST: f64 = 4.0 * WIDE_WEIGHT * WIDE_CAP as f64;
+
+/// The part's colour and the surround's (`two_colours`) where the part lies on a surface at its own
+/// depth: half the pixels `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the clean stroke show a
+/// surface within the depth gap and the lateral distance of the part's depth (a surface may slope
+/// away). None where colours or the focal length are unknown, the part is outlined against the
+/// background or what lies well behind it, or the two colours are alike.
+fn surface_colours(
+    image: &IndexImage,
+    band: &Band,
+    stroke: &CleanStroke,
+    params: &TraceParams,
+    gap: f32,
+) -> Option<SurfaceColours> {
+    let focal = params.focal_px;
+    if focal <= 0.0 || !image.has_colours() {
+        return None;
+    }
+    let (mut ring, mut total) = (Vec::new(), 0_usize);
+    for ((p, n), &z) in stroke.points.iter().zip(&stroke.normal).zip(&stroke.depth) {
+        let radius_px = params.radius * focal / z;
+        let (from, to) = ((SURROUND_FROM_R * radius_px).ceil() as usize, (SURROUND_TO_R * radius_px) as usize);
+        for step in from..=to {
+            for sign in [1.0_f32, -1.0] {
+                total += 1;
+                let t = sign * step as f32;
+                let Some(q) = image.pixel_at(p[0] + t * n[0], p[1] + t * n[1]) else { continue };
+                if image.covered(q) && (image.depth(q) - z).abs() <= gap + step as f32 * z / focal {
+                    ring.extend(image.colour(q));
+                }
+            }
+        }
+    }
+    if ring.is_empty() || (ring.len() as f32) < ON_SURFACE_SHARE * total as f32 {
+        return None;
+    }
+    let near: Vec<[f32; 3]> = band.pixel.iter().filter_map(|&p| image.colour(p as usize)).collect();
+    two_colours(&near, &ring)
+}
+
+/// The part's colour and the surround's, from the colours near the stroke (`near`) and those
+/// 3-5 `R` across it (`ring`): two clusters of both together (2-means from the median of all and that of those well off it), the
+/// part's the one that makes up more of `near` than of `ring`. Neighbours of the part's colour
+/// beside it (other sprinkles) fall in the part's cluster but do not decide which one it is; a
+/// stroke drawn mostly over the surround still has more of the part near it than 3-5 `R` away.
+/// None where the clusters lie within `PART_APART` of each other.
+fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
+    let all: Vec<[f32; 3]> = near.iter().chain(ring).copied().collect();
+    if near.is_empty() || ring.is_empty() {
+        return None;
+    }
+    // from the median of all and that of the colours well off it
+    let first = median_colour(&all);
+    let off: Vec<[f32; 3]> = all.iter().copied().filter(|&c| colour_distance(c, first) > PART_APART / 2.0).collect();
+    if off.is_empty() {
+        return None;
+    }
+    let mut centres = [first, median_colour(&off)];
+    let nearest = |c: [f32; 3], centres: &[[f32; 3]; 2]| {
+        usize::from(colour_distance(c, centres[1]) < colour_distance(c, centres[0]))
+    };
+    for _ in 0..TWO_COLOUR_ROUNDS {
+        let mut members: [Vec<[f32; 3]>; 2] = [Vec::new(), Vec::new()];
+        for &c in &all {
+            members[nearest(c, &centres)].push(c);
+        }
+        if members.iter().any(Vec::is_empty) {
+            return None;
+        }
+        centres = [median_colour(&members[0]), median_colour(&members[1])];
+    }
+    if colour_distance(centres[0], centres[1]) < PART_APART {
+        return None;
+    }
+    let share = |colours: &[[f32; 3]]| {
+        colours.iter().filter(|&&c| nearest(c, &centres) == 0).count() as f32 / colours.len() as f32
+    };
+    let (part, surround) = if share(near) > share(ring) { (0, 1) } else { (1, 0) };
+    Some(SurfaceColours { part: centres[part], surround: centres[surround] })
+}
+
+/// The per-channel median of `colours` (which must be non-empty).
+fn median_colour(colours: &[[f32; 3]]) -> [f32; 3] {
+    let channel = |k: usize| median(&mut colours.iter().map(|c| c[k]).collect::<Vec<f32>>());
+    [channel(0), channel(1), channel(2)]
+}
+
 /// Pixels within `cover_px` of any path pixel found so far.
 struct CoverMask {
     width: usize,
@@ -419,8 +549,27 @@ impl CoverMask {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_parts_colour_is_the_one_nearer_the_stroke_than_3_to_5_radii_away() {
+        let (orange, grey) = ([0.85, 0.55, 0.2], [0.5, 0.45, 0.4]);
+        let mix = |orange_share: usize, of: usize| -> Vec<[f32; 3]> {
+            (0..of).map(|k| if k < orange_share { orange } else { grey }.map(|c| c + 0.01 * (k % 3) as f32)).collect()
+        };
+        // the stroke on the part, a neighbour of its colour over most of the ring on one side
+        let colours = two_colours(&mix(70, 100), &mix(55, 100)).unwrap();
+        assert!(colour_distance(colours.part, orange) < 0.05 && colour_distance(colours.surround, grey) < 0.05);
+        // a stroke drawn mostly over the surface beside the part
+        let colours = two_colours(&mix(40, 100), &mix(10, 100)).unwrap();
+        assert!(colour_distance(colours.part, orange) < 0.05, "{colours:?}");
+        assert!(colours.is_surround([0.55, 0.45, 0.4]) && !colours.is_surround([0.8, 0.5, 0.25]));
+        // colours alike: none
+        let alike: Vec<[f32; 3]> = mix(50, 100).iter().map(|c| c.map(|v| 0.5 + 0.2 * (v - 0.5))).collect();
+        assert_eq!(two_colours(&alike, &alike), None);
+    }
 
     #[test]
     fn the_cover_mask_stamps_the_pixels_within_its_radius() {

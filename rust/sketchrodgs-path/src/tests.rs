@@ -341,6 +341,42 @@ fn the_radius_of_a_rope_lying_on_a_floor_is_told_by_its_colour() {
 }
 
 #[test]
+fn a_rope_lying_on_a_floor_of_big_gaussians_is_followed_by_its_colour_under_a_stroke_beside_it() {
+    // A rope 5 px thick (rows 18..=22) on a floor at its own depth made of Gaussians 10 px square
+    // (a step within one is free), the stroke drawn 4 px above the rope, over the floor: by depth and
+    // width the two are alike and the path follows the stroke on the floor. The rope's Gaussians
+    // are orange and the floor's grey: the path keeps to the rope.
+    let mut scene = Synthetic::new(80, 40, FOCAL, |_, _| Some(5.0));
+    let on_rope = |row: usize| (18..=22).contains(&row);
+    let first_block = scene.centres.len();
+    for row in (0..40).filter(|&row| !on_rope(row)) {
+        for col in 0..80 {
+            let block = (row / 10) * 8 + col / 10;
+            scene.index[row * 80 + col] = (first_block + block) as i32;
+        }
+    }
+    for block in 0..32 {
+        let (x, y) = ((block % 8) as f32 * 10.0 + 5.0, (block / 8) as f32 * 10.0 + 5.0);
+        scene.centres.push([x * 5.0 / FOCAL, y * 5.0 / FOCAL, 5.0]);
+    }
+    let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
+    let colours: Vec<[f32; 3]> = (0..scene.centres.len())
+        .map(|g| if g < first_block && on_rope(g / 80) { [0.85, 0.55, 0.2] } else { [0.5, 0.45, 0.4] })
+        .collect();
+    let params = TraceParams { radius: 0.125, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
+    let stroke = [[2.5, 15.5], [77.5, 15.5]];
+    let middle_rows = |trace: &Trace| -> Vec<u32> {
+        trace.pieces.iter().flat_map(|p| &p.pixels).filter(|p| (10..70).contains(&p[0])).map(|p| p[1]).collect()
+    };
+    let plain = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
+    assert!(middle_rows(&plain).iter().any(|&r| !on_rope(r as usize)), "without colours the path takes the floor");
+    let image = scene.image().with_colours(&ids, &colours).unwrap();
+    let trace = trace_stroke(&image, &scene.centres, &stroke, &params).unwrap();
+    let rows = middle_rows(&trace);
+    assert!(!rows.is_empty() && rows.iter().all(|&r| on_rope(r as usize)), "rows {rows:?}");
+}
+
+#[test]
 fn the_radius_of_a_shaded_rope_against_the_background_or_a_wall_behind_is_its_silhouettes() {
     // A rope 9 px thick (rows 16..=24) against nothing, whose Gaussians' colours change across it
     // (light on top, dark below, as a capture's baked shading): by colour it would measure a few

@@ -26,11 +26,12 @@ fn path_err(err: PathError) -> PyErr {
 /// index (H, W) int32 and depth (H, W) float32 are the index image K and its depth Z; centres
 /// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width or 1.25 R in pixels, the wider;
 /// `focal_px` is the camera's focal length in pixels (0: unknown); `alpha` (H, W) float32 or None.
-/// Returns a `Trace` (its `pieces`, `clean_stroke` and `coverage`). `rendered` (tiles, see `RenderedTiles`)
+/// Returns a `Trace` (its `pieces`, `clean_stroke` and `coverage`). `colours`, if known, as for
+/// `estimate_radius`: the path keeps off the colour of a surface the part lies on. `rendered` (tiles, see `RenderedTiles`)
 /// says that only those 16x16 tiles were rendered; reads outside them are set in `missed`
 /// (same shape, bool), also when the trace fails.
 #[pyfunction]
-#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None, rendered = None, missed = None, behind = None))]
+#[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None, rendered = None, missed = None, behind = None, colours = None))]
 #[allow(clippy::too_many_arguments)]
 fn trace_stroke<'py>(
     py: Python<'py>,
@@ -47,9 +48,17 @@ fn trace_stroke<'py>(
     rendered: Option<Bound<'py, PyArray2<bool>>>,
     missed: Option<Bound<'py, PyArray2<bool>>>,
     behind: Option<BehindArgs<'py>>,
+    colours: Option<ColourArgs<'py>>,
 ) -> PyResult<Trace> {
     let (index, depth, centres, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
+    let colours = match &colours {
+        Some((ids, rgb)) => {
+            check_shape("colours", rgb.shape(), &[None, Some(3)])?;
+            Some((ids.try_readonly()?, rgb.try_readonly()?))
+        }
+        None => None,
+    };
     let alpha = alpha.as_ref().map(|a| a.try_readonly()).transpose()?;
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
@@ -64,6 +73,11 @@ fn trace_stroke<'py>(
     let behind = behind.map(|b| BehindArrays::read(b, height, width)).transpose()?;
     if let Some(b) = &behind {
         image = b.attach(image)?;
+    }
+    if let Some((ids, rgb)) = &colours {
+        image = image
+            .with_colours(contiguous(ids, "colour ids")?, as_rows(contiguous(rgb, "colours")?))
+            .map_err(path_err)?;
     }
     let centres: &[[f32; 3]] = as_rows(contiguous(&centres, "centres")?);
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
@@ -106,6 +120,7 @@ fn trace_stroke<'py>(
         clean_stroke: clean.into_pyarray(py).unbind(),
         coverage: trace.coverage,
         wants_behind: trace.wants_behind,
+        colours: trace.colours.map(|c| (c.part, c.surround)),
     })
 }
 
@@ -122,14 +137,16 @@ pub struct TracePiece {
     lost_progress: Option<f32>,
 }
 
-/// A trace: its pieces, the stroke as cleaned up (M', 2) float32, the share of it covered, and
-/// whether the layers behind the image, not given, could change it (`wants_behind`).
+/// A trace: its pieces, the stroke as cleaned up (M', 2) float32, the share of it covered,
+/// whether the layers behind the image, not given, could change it (`wants_behind`), and where the
+/// part lies on a surface of another colour, (the part's colour, the surface's) RGB (`colours`).
 #[pyclass(module = "sketchrodgs._core", name = "Trace", frozen, get_all)]
 pub struct Trace {
     pieces: Vec<Py<TracePiece>>,
     clean_stroke: Py<PyArray2<f32>>,
     coverage: f32,
     wants_behind: bool,
+    colours: Option<([f32; 3], [f32; 3])>,
 }
 
 /// The object's radius from its visible width under a stroke (`sketchrodgs_path::estimate_radius`):
