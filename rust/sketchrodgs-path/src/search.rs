@@ -385,23 +385,26 @@ fn wide_penalty(
 /// edge beside it, and the surface measures as wide as the part there: only colour tells them
 /// apart (docs/extraction.md, "A part lying on a surface"). The surface is what lies
 /// `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the stroke on both sides, where
-/// `ON_SURFACE_SHARE` of those pixels lie at the part's depth (within the depth gap and the lateral
-/// distance: the surface may slope away).
+/// `ON_SURFACE_SHARE` of those pixels lie at the part's depth: within the depth gap and
+/// `SURFACE_SLOPE` times the lateral distance (a surface seen obliquely slopes away; at 1, a
+/// sprinkle on the donut's side in sprinkle_13's az000, its surface 8 R in front and 10 R behind at
+/// 3-5 R, had none).
 const SURROUND_FROM_R: f32 = 3.0;
 const SURROUND_TO_R: f32 = 5.0;
 const ON_SURFACE_SHARE: f32 = 0.5;
+const SURFACE_SLOPE: f32 = 2.0;
 /// The two colours (`two_colours`) must lie this far apart (RGB, Euclidean).
 const PART_APART: f32 = 0.25;
 const TWO_COLOUR_ROUNDS: usize = 4;
 /// Extra cost per pixel step onto a pixel nearer the surround's colour than the part's, in units of
-/// a pixel's world size: four times a surface `WIDE_CAP` radii too wide. From once to eight times
-/// the sprinkles' numbers are the same (8 misses); without it, 10.
+/// a pixel's world size: four times a surface `WIDE_CAP` radii too wide. From a quarter to twice
+/// that the sprinkles' numbers are the same (7 misses); without it, 10.
 const SURROUND_COST: f64 = 4.0 * WIDE_WEIGHT * WIDE_CAP as f64;
 
 /// The part's colour and the surround's (`two_colours`) where the part lies on a surface at its own
 /// depth: half the pixels `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the clean stroke show a
-/// surface within the depth gap and the lateral distance of the part's depth (a surface may slope
-/// away). None where colours or the focal length are unknown, the part is outlined against the
+/// surface within the depth gap and `SURFACE_SLOPE` times the lateral distance of the part's
+/// depth. None where colours or the focal length are unknown, the part is outlined against the
 /// background or what lies well behind it, or the two colours are alike.
 fn surface_colours(
     image: &IndexImage,
@@ -423,7 +426,7 @@ fn surface_colours(
                 total += 1;
                 let t = sign * step as f32;
                 let Some(q) = image.pixel_at(p[0] + t * n[0], p[1] + t * n[1]) else { continue };
-                if image.covered(q) && (image.depth(q) - z).abs() <= gap + step as f32 * z / focal {
+                if image.covered(q) && (image.depth(q) - z).abs() <= gap + SURFACE_SLOPE * step as f32 * z / focal {
                     ring.extend(image.colour(q));
                 }
             }
@@ -437,8 +440,8 @@ fn surface_colours(
 }
 
 /// The part's colour and the surround's, from the colours near the stroke (`near`) and those
-/// 3-5 `R` across it (`ring`): two clusters of both together (2-means from the median of all and that of those well off it), the
-/// part's the one that makes up more of `near` than of `ring`. Neighbours of the part's colour
+/// 3-5 `R` across it (`ring`): two clusters of both together (2-means from the median of all and
+/// that of those well off it), the part's the one that makes up more of `near` than of `ring`. Neighbours of the part's colour
 /// beside it (other sprinkles) fall in the part's cluster but do not decide which one it is; a
 /// stroke drawn mostly over the surround still has more of the part near it than 3-5 `R` away.
 /// None where the clusters lie within `PART_APART` of each other.
