@@ -441,10 +441,10 @@ fn surface_colours(
 
 /// The part's colour and the surround's, from the colours near the stroke (`near`) and those
 /// 3-5 `R` across it (`ring`): two clusters of both together (2-means from the median of all and
-/// that of those well off it), the part's the one that makes up more of `near` than of `ring`. Neighbours of the part's colour
-/// beside it (other sprinkles) fall in the part's cluster but do not decide which one it is; a
-/// stroke drawn mostly over the surround still has more of the part near it than 3-5 `R` away.
-/// None where the clusters lie within `PART_APART` of each other.
+/// that of those well off it), the part's the one that makes up more of `near` than of `ring`.
+/// Neighbours of the part's colour beside it (other sprinkles) fall in the part's cluster but do not
+/// decide which one it is; a stroke drawn mostly over the surround still has more of the part near
+/// it than 3-5 `R` away. None where the clusters lie within `PART_APART` of each other.
 fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
     let all: Vec<[f32; 3]> = near.iter().chain(ring).copied().collect();
     if near.is_empty() || ring.is_empty() {
