@@ -220,6 +220,23 @@ def test_a_rope_lying_on_a_floor_is_followed_with_its_radius_given(rope_on_floor
 
 
 @pytest.mark.parametrize("tilt_deg", [30, 60, 80])
+def test_a_rope_lying_on_a_floor_stroked_beside_it_keeps_its_rod_on_the_rope(rope_on_floor, tilt_deg):
+    """A stroke drawn 1.5 R beside the rope, over the floor: floor and rope lie at one depth and
+    measure alike, so the path ran on the floor under the stroke and the rod lay 1.3-2.4 R off the
+    rope's axis (mean). The floor's grey and the rope's colour tell them apart (docs/extraction.md,
+    "A part lying on a surface")."""
+    camera = floor_camera(tilt_deg)
+    stroke = floor_stroke(rope_on_floor.axes[0], camera)
+    _, depth = camera.project(rope_on_floor.axes[0])
+    radius_px = rope_on_floor.radius * camera.fx / np.median(depth)
+    tangent = np.gradient(stroke, axis=0)
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1) / np.linalg.norm(tangent, axis=1)[:, None]
+    ex = extract_rod(rope_on_floor.scene, camera, stroke + 1.5 * radius_px * normal, radius=rope_on_floor.radius)
+    distance = cKDTree(rope_on_floor.axes[0]).query(ex.polyline)[0] / rope_on_floor.radius
+    assert distance.mean() <= 0.5 and distance.max() <= 1.0, (distance.mean(), distance.max())
+
+
+@pytest.mark.parametrize("tilt_deg", [30, 60, 80])
 def test_a_rope_lying_on_a_floor_estimates_its_radius(rope_on_floor, tilt_deg):
     """Its widths run on over the floor (3.1 x from 30 degrees, 6.9 x from 60, before the colour
     was read); the estimate is to match the same rope's without the floor (its visible half-width,
