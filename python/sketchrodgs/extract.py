@@ -370,7 +370,8 @@ def extract_rod(
     _check_vertex_count("radius", pl.polyline_length(points), radius / 2, radius, 4 * MAX_ROD_VERTICES)
     points = pl.resample(points, radius / 2)
     if recentre:
-        nearby = scene.means[pl.near_box(points, scene.means, 2.5 * radius)]
+        # on a surface of another colour, the axis is the part's Gaussians' only (`_of_the_part`)
+        nearby = scene.means[_of_the_part(pl.near_box(points, scene.means, 2.5 * radius), scene, trace.colours)]
         points = pl.recentre(points, nearby, radius)
     points = pl.smooth_axis(points, radius, smoothing)
     points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2])
@@ -602,10 +603,10 @@ def _near_the_path(pixels: np.ndarray, ids: np.ndarray, means: np.ndarray, camer
 
 
 def _of_the_part(ids: np.ndarray, scene: GaussianScene, colours: tuple | None) -> np.ndarray:
-    """The path's Gaussians `ids` less those of the colour of the surface the part lies on, where
-    the trace found one (`Trace.colours`: the part's colour and the surface's): the path keeps to the
-    part's pixels, but a large surface Gaussian can own some at its edge. All are kept where fewer
-    than 2 would be left."""
+    """The Gaussians `ids` less those of the colour of the surface the part lies on, where the trace
+    found one (`Trace.colours`: the part's colour and the surface's). The path keeps to the part's
+    pixels, but a large surface Gaussian can own some at its edge; and the recentring's cross-sections
+    reach over the surface around the part. All are kept where fewer than 2 would be left."""
     if colours is None or len(ids) == 0:
         return ids
     part, surround = (np.asarray(c, np.float32) for c in colours)

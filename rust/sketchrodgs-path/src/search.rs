@@ -395,6 +395,7 @@ const ON_SURFACE_SHARE: f32 = 0.5;
 const SURFACE_SLOPE: f32 = 2.0;
 /// The two colours (`two_colours`) must lie this far apart (RGB, Euclidean).
 const PART_APART: f32 = 0.25;
+const CHROMA_APART: f32 = 0.1;
 const TWO_COLOUR_ROUNDS: usize = 4;
 /// Extra cost per pixel step onto a pixel nearer the surround's colour than the part's, in units of
 /// a pixel's world size: four times a surface `WIDE_CAP` radii too wide. From a quarter to twice
@@ -470,7 +471,9 @@ fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
         }
         centres = [median_colour(&members[0]), median_colour(&members[1])];
     }
-    if colour_distance(centres[0], centres[1]) < PART_APART {
+    if colour_distance(centres[0], centres[1]) < PART_APART
+        || colour_distance(chroma(centres[0]), chroma(centres[1])) < CHROMA_APART
+    {
         return None;
     }
     let share = |colours: &[[f32; 3]]| {
@@ -478,6 +481,13 @@ fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
     };
     let (part, surround) = if share(near) > share(ring) { (0, 1) } else { (1, 0) };
     Some(SurfaceColours { part: centres[part], surround: centres[surround] })
+}
+
+/// `colour` over the sum of its channels (0.1 at least): its hue and saturation without its
+/// brightness, which shading changes.
+fn chroma(colour: [f32; 3]) -> [f32; 3] {
+    let sum = colour.iter().sum::<f32>().max(0.1);
+    colour.map(|c| c / sum)
 }
 
 /// The per-channel median of `colours` (which must be non-empty).
