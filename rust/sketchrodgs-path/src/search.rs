@@ -582,6 +582,12 @@ mod tests {
         // colours alike: none
         let alike: Vec<[f32; 3]> = mix(50, 100).iter().map(|c| c.map(|v| 0.5 + 0.2 * (v - 0.5))).collect();
         assert_eq!(two_colours(&alike, &alike), None);
+        // a lit side and a shaded side of one bark (the same hue, 0.4 apart in RGB): none
+        let (lit, shaded) = ([0.95, 0.73, 0.29], [0.62, 0.5, 0.21]);
+        let bark = |lit_share: usize| -> Vec<[f32; 3]> {
+            (0..100).map(|k| if k < lit_share { lit } else { shaded }).collect()
+        };
+        assert_eq!(two_colours(&bark(70), &bark(30)), None);
     }
 
     #[test]
