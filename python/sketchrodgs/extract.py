@@ -490,8 +490,54 @@ def _trace(
         # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length.
         radius = found / 4
         trace, pixel_path, path_ids, points = trace_path(radius)
+    if estimated and trace.colours is not None:
+        # on a surface of another colour, the part's width is where its colour ends
+        by_colour = _radius_by_colour(scene, index, depth, opacity, trace, focal)
+        if by_colour is not None:
+            radius = by_colour
+            trace, pixel_path, path_ids, points = trace_path(radius)
     timings["path_search"] = time.perf_counter() - clock
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
+
+
+def _radius_by_colour(
+    scene: GaussianScene,
+    index: np.ndarray,
+    depth: np.ndarray,
+    opacity: np.ndarray,
+    trace: _core.Trace,
+    focal: float,
+) -> float | None:
+    """R of a part lying on a surface of another colour (`Trace.colours`), measured from the path:
+    from each path pixel, walk both ways across the clean stroke until a pixel shows nothing or a
+    Gaussian nearer the surface's colour than the part's (at most 1/8 of the image each way); R is
+    the median half-width in world units. The radius estimate walks from the stroke's samples, which
+    a stroke drawn beside the part puts on the surface, and stops by a colour taken under the
+    stroke; the path keeps to the part (docs/extraction.md, "A part lying on a surface")."""
+    pixels = np.concatenate([p.pixels.astype(np.int64) for p in trace.pieces])
+    clean = np.asarray(trace.clean_stroke, np.float64)
+    if trace.colours is None or len(clean) < 2 or len(pixels) == 0:
+        return None
+    part, surround = (np.asarray(c, np.float32) for c in trace.colours)
+    tangent = np.gradient(clean, axis=0)
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    nearest = np.argmin(((pixels[:, None, :] - clean[None]) ** 2).sum(axis=2), axis=1)
+    height, width = index.shape
+    steps = np.arange(1, max(width, height) // 8 + 1)
+    reach = []
+    for sign in (1, -1):
+        walk = np.rint(pixels[:, None, :] + sign * steps[None, :, None] * normal[nearest][:, None, :]).astype(np.int64)
+        inside = (walk >= 0).all(axis=2) & (walk[..., 0] < width) & (walk[..., 1] < height)
+        col, row = np.clip(walk[..., 0], 0, width - 1), np.clip(walk[..., 1], 0, height - 1)
+        ids = index[row, col]
+        rgb = scene.colors_of(np.maximum(ids, 0).ravel()).reshape(ids.shape + (3,))
+        on_part = np.linalg.norm(rgb - part, axis=2) <= np.linalg.norm(rgb - surround, axis=2)
+        stop = ~(inside & (ids >= 0) & (opacity[row, col] >= 0.5) & on_part)
+        reach.append(np.where(stop.any(axis=1), np.argmax(stop, axis=1), len(steps)))
+    half = 0.5 * (reach[0] + reach[1] + 1) * depth[pixels[:, 1], pixels[:, 0]] / focal
+    half = half[np.isfinite(half) & (half > 0)]
+    return float(np.median(half)) if len(half) else None
 
 
 def _with_near_plane_hint(message: str, scene: GaussianScene, camera: Camera, stroke: np.ndarray) -> str:
