@@ -491,11 +491,15 @@ def _trace(
         radius = found / 4
         trace, pixel_path, path_ids, points = trace_path(radius)
     if estimated and trace.colours is not None:
-        # on a surface of another colour, the part's width is where its colour ends
+        # on a surface of another colour, the part's width is where its colour ends; an answer far
+        # off the estimate (a few pixels of the part's colour) or a trace that then fails keeps it
         by_colour = _radius_by_colour(scene, index, depth, opacity, trace, focal)
-        if by_colour is not None:
-            radius = by_colour
-            trace, pixel_path, path_ids, points = trace_path(radius)
+        if by_colour is not None and 0.25 * radius <= by_colour <= 4 * radius:
+            try:
+                trace, pixel_path, path_ids, points = trace_path(by_colour)
+                radius = by_colour
+            except PathNotFoundError:
+                pass
     timings["path_search"] = time.perf_counter() - clock
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
 
