@@ -5,7 +5,7 @@ use std::ops::Range;
 
 use crate::search::WALK_RADII;
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{Walks, colour_distance, median};
+use crate::width::{Walks, colour_distance, median, median_colour};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// The first radius is the median of the slender cluster of half-widths (`slender_cluster`): the
@@ -156,8 +156,7 @@ fn part_colour(image: &IndexImage, pixels: &[Option<usize>]) -> Option<([f32; 3]
     if colours.is_empty() {
         return None;
     }
-    let channel = |k: usize| median(&mut colours.iter().map(|c| c[k]).collect::<Vec<f32>>());
-    let centre = [channel(0), channel(1), channel(2)];
+    let centre = median_colour(&colours);
     let mut off: Vec<f32> = colours.iter().map(|&c| colour_distance(c, centre)).collect();
     let spread = median(&mut off);
     Some((centre, (COLOUR_SPREADS * spread).max(COLOUR_OFF_LEAST)))

@@ -6,7 +6,7 @@ use std::collections::{BinaryHeap, HashSet};
 
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{WIDE_CAP, Walks, colour_distance, median};
+use crate::width::{WIDE_CAP, Walks, colour_distance, median_colour};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// How a piece of the path ended.
@@ -488,12 +488,6 @@ fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
 fn chroma(colour: [f32; 3]) -> [f32; 3] {
     let sum = colour.iter().sum::<f32>().max(0.1);
     colour.map(|c| c / sum)
-}
-
-/// The per-channel median of `colours` (which must be non-empty).
-fn median_colour(colours: &[[f32; 3]]) -> [f32; 3] {
-    let channel = |k: usize| median(&mut colours.iter().map(|c| c[k]).collect::<Vec<f32>>());
-    [channel(0), channel(1), channel(2)]
 }
 
 /// Pixels within `cover_px` of any path pixel found so far.

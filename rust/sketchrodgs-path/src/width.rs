@@ -215,6 +215,12 @@ pub(crate) fn median(values: &mut [f32]) -> f32 {
     if n % 2 == 1 { values[n / 2] } else { 0.5 * (values[n / 2 - 1] + values[n / 2]) }
 }
 
+/// The per-channel median of `colours` (which must be non-empty).
+pub(crate) fn median_colour(colours: &[[f32; 3]]) -> [f32; 3] {
+    let channel = |k: usize| median(&mut colours.iter().map(|c| c[k]).collect::<Vec<f32>>());
+    [channel(0), channel(1), channel(2)]
+}
+
 /// The RGB Euclidean distance between two colours.
 pub(crate) fn colour_distance(a: [f32; 3], b: [f32; 3]) -> f32 {
     a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>().sqrt()
