@@ -427,23 +427,8 @@ def _trace(
     region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed, "behind": partial.behind_arrays()}
     clock = time.perf_counter()
     estimated, estimate_wants = radius is None, False
-    # The Gaussians' colours near the stroke: the radius estimate's width walks read them (within
-    # the band and 1/8 of the image's larger side each way, radius.rs) and the path's colour term
-    # (within the band and 5 R across the stroke, search.rs), docs/extraction.md, "A part lying on a
-    # surface".
     shown = [index, *(region["behind"][:1] if region["behind"] else [])]
-    height, width = index.shape
-    band = max(band_px or 0.0, 0.01 * width, 2.0)
-    if radius is None:
-        reach = band + max(width, height) / 8 + 2
-    else:
-        pixels = np.floor(work).astype(np.int64)
-        pixels = pixels[(pixels >= 0).all(axis=1) & (pixels[:, 0] < width) & (pixels[:, 1] < height)]
-        under = depth[pixels[:, 1], pixels[:, 0]]
-        under = under[np.isfinite(under) & (under > 0)]
-        radius_px = radius * focal / float(np.min(under)) if len(under) else 0.25 * max(width, height)
-        reach = band + min(5 * radius_px, max(width, height) / 8) + 2
-    colours = _shown_colours(scene, shown, work, reach)
+    colours = _shown_colours(scene, shown, work, _colours_reach(depth, work, radius, focal, band_px))
     if radius is None:
         try:
             radius, estimate_wants = _core.estimate_radius(
@@ -522,7 +507,6 @@ def _radius_by_colour(
     clean = np.asarray(trace.clean_stroke, np.float64)
     if trace.colours is None or len(clean) < 2 or len(pixels) == 0:
         return None
-    part, surround = (np.asarray(c, np.float32) for c in trace.colours)
     tangent = np.gradient(clean, axis=0)
     normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
@@ -535,8 +519,7 @@ def _radius_by_colour(
         inside = (walk >= 0).all(axis=2) & (walk[..., 0] < width) & (walk[..., 1] < height)
         col, row = np.clip(walk[..., 0], 0, width - 1), np.clip(walk[..., 1], 0, height - 1)
         ids = index[row, col]
-        rgb = scene.colors_of(np.maximum(ids, 0).ravel()).reshape(ids.shape + (3,))
-        on_part = np.linalg.norm(rgb - part, axis=2) <= np.linalg.norm(rgb - surround, axis=2)
+        on_part = _part_coloured(scene.colors_of(np.maximum(ids, 0).ravel()), trace.colours).reshape(ids.shape)
         stop = ~(inside & (ids >= 0) & (opacity[row, col] >= 0.5) & on_part)
         reach.append(np.where(stop.any(axis=1), np.argmax(stop, axis=1), len(steps)))
     half = 0.5 * (reach[0] + reach[1] + 1) * depth[pixels[:, 1], pixels[:, 0]] / focal
@@ -551,6 +534,25 @@ def _with_near_plane_hint(message: str, scene: GaussianScene, camera: Camera, st
         return message
     hint = near_plane.culled_under_stroke(scene, camera, stroke)
     return f"{message}; {hint}" if hint else message
+
+
+def _colours_reach(
+    depth: np.ndarray, stroke: np.ndarray, radius: float | None, focal: float, band_px: float | None
+) -> float:
+    """How far from the stroke's bounding box, in pixels, the Gaussians' colours are read: the radius
+    estimate's width walks reach the band and 1/8 of the image's larger side (radius.rs), the path's
+    colour term the band and 5 R across the stroke (search.rs; R in pixels at the nearest depth under
+    the stroke), docs/extraction.md, "A part lying on a surface"."""
+    height, width = depth.shape
+    band = max(band_px or 0.0, 0.01 * width, 2.0)
+    if radius is None:
+        return band + max(width, height) / 8 + 2
+    pixels = np.floor(stroke).astype(np.int64)
+    pixels = pixels[(pixels >= 0).all(axis=1) & (pixels[:, 0] < width) & (pixels[:, 1] < height)]
+    under = depth[pixels[:, 1], pixels[:, 0]]
+    under = under[np.isfinite(under) & (under > 0)]
+    radius_px = radius * focal / float(np.min(under)) if len(under) else 0.25 * max(width, height)
+    return band + min(5 * radius_px, max(width, height) / 8) + 2
 
 
 def _shown_colours(
@@ -659,10 +661,15 @@ def _of_the_part(ids: np.ndarray, scene: GaussianScene, colours: tuple | None) -
     reach over the surface around the part. All are kept where fewer than 2 would be left."""
     if colours is None or len(ids) == 0:
         return ids
-    part, surround = (np.asarray(c, np.float32) for c in colours)
-    rgb = scene.colors_of(ids)
-    keep = np.linalg.norm(rgb - part, axis=1) <= np.linalg.norm(rgb - surround, axis=1)
+    keep = _part_coloured(scene.colors_of(ids), colours)
     return ids[keep] if keep.sum() >= 2 else ids
+
+
+def _part_coloured(rgb: np.ndarray, colours: tuple) -> np.ndarray:
+    """Per row of `rgb` (K, 3): whether it is at least as near the part's colour as the surface's
+    (`Trace.colours`; as `SurfaceColours::is_surround` in search.rs, negated)."""
+    part, surround = (np.asarray(c, np.float32) for c in colours)
+    return np.linalg.norm(rgb - part, axis=1) <= np.linalg.norm(rgb - surround, axis=1)
 
 
 def _forward_only(ids: np.ndarray, means: np.ndarray, camera: Camera, stroke: np.ndarray, radius: float) -> np.ndarray:

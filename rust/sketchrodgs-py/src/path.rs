@@ -2,8 +2,8 @@
 
 use numpy::ndarray::Array2;
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadwriteArray2,
-    PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyReadwriteArray2, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
@@ -27,9 +27,9 @@ fn path_err(err: PathError) -> PyErr {
 /// (N, 3) float32; stroke (M, 2) float32 pixel coordinates. `band_px = 0` means 1 % of the width or 1.25 R in pixels, the wider;
 /// `focal_px` is the camera's focal length in pixels (0: unknown); `alpha` (H, W) float32 or None.
 /// Returns a `Trace` (its `pieces`, `clean_stroke` and `coverage`). `colours`, if known, as for
-/// `estimate_radius`: the path keeps off the colour of a surface the part lies on. `rendered` (tiles, see `RenderedTiles`)
-/// says that only those 16x16 tiles were rendered; reads outside them are set in `missed`
-/// (same shape, bool), also when the trace fails.
+/// `estimate_radius`: the path keeps off the colour of a surface the part lies on. `rendered`
+/// (tiles, see `RenderedTiles`) says that only those 16x16 tiles were rendered; reads outside them
+/// are set in `missed` (same shape, bool), also when the trace fails.
 #[pyfunction]
 #[pyo3(signature = (index, depth, centres, stroke, radius, stroke_weight = 1.0, band_px = 0.0, cover_px = 10.0, focal_px = 0.0, alpha = None, rendered = None, missed = None, behind = None, colours = None))]
 #[allow(clippy::too_many_arguments)]
@@ -52,13 +52,7 @@ fn trace_stroke<'py>(
 ) -> PyResult<Trace> {
     let (index, depth, centres, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, centres.try_readonly()?, stroke.try_readonly()?);
-    let colours = match &colours {
-        Some((ids, rgb)) => {
-            check_shape("colours", rgb.shape(), &[None, Some(3)])?;
-            Some((ids.try_readonly()?, rgb.try_readonly()?))
-        }
-        None => None,
-    };
+    let colours = colours.map(ColourArrays::read).transpose()?;
     let alpha = alpha.as_ref().map(|a| a.try_readonly()).transpose()?;
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
@@ -74,10 +68,8 @@ fn trace_stroke<'py>(
     if let Some(b) = &behind {
         image = b.attach(image)?;
     }
-    if let Some((ids, rgb)) = &colours {
-        image = image
-            .with_colours(contiguous(ids, "colour ids")?, as_rows(contiguous(rgb, "colours")?))
-            .map_err(path_err)?;
+    if let Some(c) = &colours {
+        image = c.attach(image)?;
     }
     let centres: &[[f32; 3]] = as_rows(contiguous(&centres, "centres")?);
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
@@ -172,13 +164,7 @@ fn estimate_radius<'py>(
 ) -> PyResult<(f32, bool)> {
     let (index, depth, alpha, stroke) =
         (index.try_readonly()?, depth.try_readonly()?, alpha.try_readonly()?, stroke.try_readonly()?);
-    let colours = match &colours {
-        Some((ids, rgb)) => {
-            check_shape("colours", rgb.shape(), &[None, Some(3)])?;
-            Some((ids.try_readonly()?, rgb.try_readonly()?))
-        }
-        None => None,
-    };
+    let colours = colours.map(ColourArrays::read).transpose()?;
     let (height, width) = (index.shape()[0], index.shape()[1]);
     check_shape("depth", depth.shape(), &[Some(height), Some(width)])?;
     check_shape("alpha", alpha.shape(), &[Some(height), Some(width)])?;
@@ -193,9 +179,7 @@ fn estimate_radius<'py>(
         None => image,
     };
     let image = match &colours {
-        Some((ids, rgb)) => image
-            .with_colours(contiguous(ids, "colour ids")?, as_rows(contiguous(rgb, "colours")?))
-            .map_err(path_err)?,
+        Some(c) => c.attach(image)?,
         None => image,
     };
     let stroke: &[[f32; 2]] = as_rows(contiguous(&stroke, "stroke")?);
@@ -210,6 +194,24 @@ fn estimate_radius<'py>(
 
 /// The colours of some Gaussians: ids (M,) uint32 ascending, rgb (M, 3) float32.
 type ColourArgs<'py> = (Bound<'py, PyArray1<u32>>, Bound<'py, PyArray2<f32>>);
+
+/// The `colours` argument, borrowed.
+struct ColourArrays<'py>(PyReadonlyArray1<'py, u32>, PyReadonlyArray2<'py, f32>);
+
+impl<'py> ColourArrays<'py> {
+    /// Borrow the arrays, checking that the colours are rows of 3.
+    fn read((ids, rgb): ColourArgs<'py>) -> PyResult<Self> {
+        check_shape("colours", rgb.shape(), &[None, Some(3)])?;
+        Ok(Self(ids.try_readonly()?, rgb.try_readonly()?))
+    }
+
+    /// The image with these colours.
+    fn attach<'a>(&'a self, image: IndexImage<'a>) -> PyResult<IndexImage<'a>> {
+        image
+            .with_colours(contiguous(&self.0, "colour ids")?, as_rows(contiguous(&self.1, "colours")?))
+            .map_err(path_err)
+    }
+}
 
 /// The layers behind the image, (index, depth, alpha) each (L, H, W): int32, float32, float32
 /// (`sketchrodgs.render.render_behind`, stacked).
