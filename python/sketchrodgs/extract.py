@@ -28,6 +28,7 @@ from .render import render as render_scene
 from .rod import MAX_ROD_VERTICES
 from .scene import GaussianScene
 from .scene_identity import SceneIdentity
+from .working_view import WORKING_WIDTH, WorkingView
 
 DEFAULT_SMOOTHING = 1.0  # radii (polyline.smooth_axis)
 MAX_SMOOTHING = 100.0  # far past any use: the axis is a straight line long before
@@ -261,6 +262,7 @@ def extract_rod(
     attach_size: float | None = None,
     recentre: bool = True,
     render: RenderResult | None = None,
+    working_width: int | None = WORKING_WIDTH,
 ) -> Extraction:
     """Extract the slender object under `stroke`.
 
@@ -284,6 +286,9 @@ def extract_rod(
         recentre: move the visible surface points onto the axis (our addition; the paper keeps them).
         render: a render of `scene` by `camera` with `index`, `index_depth` and `alpha` (made if
             None; without alpha, widths are measured on the index image alone).
+        working_width: a view wider than this is traced on a copy scaled down to this width, so that
+            the rod does not depend on the resolution (docs/extraction.md, "Resolution"); None
+            traces every view at its own size.
 
     The stroke may overshoot the object at either end (it is trimmed to where it meets the object it
     follows), pass over occluders (skipped by depth) and be drawn in either direction (the same rod).
@@ -314,9 +319,54 @@ def extract_rod(
     ):
         raise SketchRodGSError(f"smoothing: must be a number of radii in 0..{MAX_SMOOTHING:g}, got {smoothing!r}")
 
+    if working_width is not None and not (isinstance(working_width, (int, np.integer)) and working_width >= 16):
+        raise SketchRodGSError(f"working_width: must be a whole number of pixels >= 16, or None, got {working_width!r}")
     shape = render.index_image.shape if render is not None else (camera.height, camera.width)
     if shape != (camera.height, camera.width):
         raise SketchRodGSError(f"render: index image is {shape}, camera is {camera.height}x{camera.width}")
+    view = WorkingView.of(camera, working_width)
+    try:
+        extraction = _extract(
+            scene,
+            view.work,
+            view.points_to_work(stroke),
+            radius,
+            alpha=alpha,
+            band_px=None if band_px is None else band_px * view.scale[0],
+            edge_length=edge_length,
+            smoothing=smoothing,
+            segment_scale=segment_scale,
+            attach=attach,
+            attach_size=attach_size,
+            recentre=recentre,
+            render=None if view.scaled else render,
+            timings=timings,
+            clock=clock,
+        )
+    except PathNotFoundError as err:
+        raise view.failure_to_user(err, stroke) from None
+    return view.extraction_to_user(extraction, stroke)
+
+
+def _extract(
+    scene: GaussianScene,
+    camera: Camera,
+    stroke: np.ndarray,
+    radius: float | None,
+    *,
+    alpha: float,
+    band_px: float | None,
+    edge_length: float | None,
+    smoothing: float,
+    segment_scale: float,
+    attach: bool,
+    attach_size: float | None,
+    recentre: bool,
+    render: RenderResult | None,
+    timings: dict[str, float],
+    clock: float,
+) -> Extraction:
+    """`extract_rod` on arguments checked, in the view it traces (`WorkingView.work`)."""
     given = render is not None
     # The band's tiles (unless the render was given), and where the search asks for them, the
     # layers behind them.
@@ -747,6 +797,17 @@ def _check_stroke(stroke: np.ndarray) -> np.ndarray:
 def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, band_px: float | None = None) -> float:
     """R from the object's visible width under `stroke` (docs/extraction.md, "Radius"): half the
     width of the surface across the stroke, where it stays solid (alpha >= 0.5) and its depth does
-    not jump, in world units at its depth; the median over the stroke's samples on the object."""
-    index, depth, opacity, work, _ = _search_inputs(render, _check_stroke(stroke))
-    return float(_core.estimate_radius(index, depth, opacity, work, float(camera.fx), float(band_px or 0.0))[0])
+    not jump, in world units at its depth; the median over the stroke's samples on the object. A
+    view wider than `WORKING_WIDTH` is measured scaled down to it, as `extract_rod` does."""
+    stroke = _check_stroke(stroke)
+    if render.index_image.shape != (camera.height, camera.width):
+        raise SketchRodGSError(
+            f"render: index image is {render.index_image.shape}, camera is {camera.height}x{camera.width}"
+        )
+    view = WorkingView.of(camera)
+    index, depth, opacity, work, _ = _search_inputs(view.render_to_work(render), view.points_to_work(stroke))
+    band = float(band_px or 0.0) * view.scale[0]
+    try:
+        return float(_core.estimate_radius(index, depth, opacity, work, float(view.work.fx), band)[0])
+    except PathNotFoundError as err:
+        raise view.failure_to_user(err, stroke) from None

@@ -19,8 +19,9 @@ import numpy as np
 
 from ..camera import NEAR_PLANE, Camera
 from ..errors import CameraError
+from ..working_view import WORKING_WIDTH
 
-DEFAULT_WORKING_WIDTH = 960  # px; extraction renders at this width whatever the browser's size
+DEFAULT_WORKING_WIDTH = WORKING_WIDTH  # px; extraction renders at this width whatever the browser's size
 
 
 def quat_to_matrix(wxyz: Sequence[float] | np.ndarray) -> np.ndarray:
