@@ -44,6 +44,28 @@ def test_the_parts_own_bends_are_kept():
     assert error.mean() < 0.08 and error.max() < 0.3, (error.mean(), error.max())
 
 
+def test_a_short_axis_that_zigzags_becomes_a_parabola():
+    # a sprinkle 5 R long, gently bent, whose few Gaussians per cross-section zigzag its recentred
+    # points by 0.8 R from one to the next (donut_sprinkle_d's jittered rods folded back by 3.2 R)
+    x = np.arange(0, 5 * R + 1e-12, R / 2)
+    axis = np.stack([x, 0.02 * (x / R) ** 2 * R, np.zeros_like(x)], axis=1)
+    zigzag = axis + np.stack([np.zeros_like(x), 0.8 * R * (-1) ** np.arange(len(x)), np.zeros_like(x)], axis=1)
+    smoothed = pl.smooth_axis(zigzag, R)
+    # its turns are gone (the smoother alone left turns of 65-90 degrees), and it stays on the axis
+    steps = np.diff(smoothed, axis=0)
+    turns = np.abs(np.diff(np.degrees(np.arctan2(steps[:, 1], steps[:, 0]))))
+    assert turns.max() < 20, turns
+    assert distance_to(smoothed, axis).max() / R < 0.75
+
+
+def test_a_short_part_bent_round_keeps_its_bend():
+    # three diameters round a tight curve (180 degrees over 6 R: the ring's tip), kept as it is bent
+    angle = np.linspace(0, np.pi, 13)
+    arc = 6 * R / np.pi * np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    smoothed = pl.smooth_axis(arc, R)
+    assert distance_to(smoothed, arc).max() / R < 0.25
+
+
 def test_no_smoothing_keeps_the_points_and_short_inputs_pass_through():
     points = np.random.default_rng(2).normal(size=(20, 3))
     np.testing.assert_array_equal(pl.smooth_axis(points, R, 0.0), points)

@@ -18,6 +18,14 @@ from . import _core
 # limb a branch joins bent the axis by 1-2 R; docs/extraction.md, "Polyline").
 _ROBUST_FITS = 4
 _TUKEY_RADII = 1.3
+# An axis shorter than this many radii is smoothed into the least-squares parabola along its arc: a
+# short part (a sprinkle) has a few Gaussians per cross-section, and its recentred points zigzag by
+# a radius or more, which the smoother (over 2 pi R, longer than the part) passes through its ends
+# (docs/extraction.md, "Polyline").
+_SHORT_AXIS_RADII = 10.0
+# ... unless its halves' chords turn by this many degrees or more (a part bent round within its few
+# radii, such as the ring's tip stroked three diameters long: 88-94 degrees; sprinkles under 40-80)
+_SHORT_AXIS_TURN = 60.0
 
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
@@ -123,7 +131,9 @@ def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.nd
     (taken as evenly spaced along the arc), fitted again with Tukey weights from the residuals so
     that a cross-section pulled aside by what touches the part (a leaf at a node, a body at an end)
     does not bend the axis. The third difference leaves circular arcs alone, ends included (a
-    curvature penalty would straighten the last radii of a bent part).
+    curvature penalty would straighten the last radii of a bent part). An axis shorter than
+    `_SHORT_AXIS_RADII` radii whose halves turn by less than `_SHORT_AXIS_TURN` then becomes the
+    least-squares parabola along its arc.
 
     Args:
         points: (M, 3) axis points in order, about R/2 apart.
@@ -150,7 +160,18 @@ def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.nd
         fit = solveh_banded(system, weights[:, None] * points)
         residual = np.linalg.norm(points - fit, axis=1) / (_TUKEY_RADII * radius)
         weights = np.where(residual < 1, (1 - residual**2) ** 2, 0.0) + 1e-3
+    arc = arc_lengths(fit)
+    if 0 < arc[-1] < _SHORT_AXIS_RADII * radius and _chord_turn(fit) < _SHORT_AXIS_TURN:
+        powers = np.vander(arc / arc[-1], 3)
+        fit = powers @ np.linalg.lstsq(powers, fit, rcond=None)[0]
     return np.asarray(fit, np.float64)
+
+
+def _chord_turn(points: np.ndarray) -> float:
+    """The angle in degrees between the chords of the first and the second half of `points`."""
+    first, second = points[len(points) // 2] - points[0], points[-1] - points[len(points) // 2]
+    cosine = np.dot(first, second) / max(float(np.linalg.norm(first) * np.linalg.norm(second)), 1e-30)
+    return float(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))))
 
 
 def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
