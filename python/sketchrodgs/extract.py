@@ -272,7 +272,9 @@ def extract_rod(
         stroke: (S, 2) stroke points in continuous pixel coordinates of `camera`.
         radius: R, the object's radius in world units. When None it is estimated from the object's
             visible width across the stroke (`estimate_radius`).
-        alpha: weight of the stroke-distance term of the path cost (paper Eq. 1).
+        alpha: weight of the stroke-distance term of the path cost (paper Eq. 1; the term is in
+            units of a pixel's world size, so that the scene's units do not matter:
+            docs/extraction.md, "Search").
         band_px: half-width of the band around the stroke (default 1 % of the image width, or 1.25 R
             in pixels at the stroke's depth where that is wider).
         edge_length: polyline spacing (default from R and the object's length).

@@ -398,7 +398,9 @@ impl Rendered {
 pub struct TraceParams {
     /// `R`: radius of the slender object in world units. Depth gaps over `3R` are not crossed.
     pub radius: f32,
-    /// `alpha`: weight of the squared distance to the stroke in Eq. 1. Default 1.
+    /// `alpha`: weight of the squared distance to the stroke in Eq. 1. Default 1. With the focal
+    /// length known, the term is in units of `search::STROKE_TERM_PX` pixels' world size, so that the
+    /// path does not depend on the scene's units.
     pub stroke_weight: f64,
     /// `b`: half-width in pixels of the band around the stroke that the path may use.
     /// 0 here means the default: 1 % of the image width, or 1.25 `R` in pixels at the stroke's depth
@@ -408,8 +410,9 @@ pub struct TraceParams {
     /// A stroke vertex this close (pixels) to a path found so far counts as covered. Default 10.
     pub cover_px: f32,
     /// The camera's focal length in pixels. It turns pixels into world distance at a depth, which
-    /// lets the stroke's depth change with its length (a receding part) and the path avoid
-    /// surfaces much wider than `2R` (a leaf or body beside the part). 0: unknown, neither is done.
+    /// lets the stroke's depth change with its length (a receding part), the path avoid surfaces
+    /// much wider than `2R` (a leaf or body beside the part) and the stroke term weigh the same in
+    /// any units. 0: unknown, none of these is done.
     pub focal_px: f32,
 }
 

@@ -281,11 +281,20 @@ fn the_path_keeps_off_a_wide_surface_touching_the_part() {
     let leaf = |col: usize, row: usize| ((20..=60).contains(&col) && (22..=34).contains(&row)).then_some(5.0);
     let scene = Synthetic::new(80, 40, FOCAL, move |col, row| rope(col, row).or_else(|| leaf(col, row)));
     let stroke = [[2.5, 20.5], [20.5, 24.5], [60.5, 24.5], [77.5, 20.5]];
-    let trace = scene.trace(&stroke, 0.075).unwrap();
+    // The stroke term is relative to the image's half-width: 4 px off in this 80 px image weigh as
+    // 48 px would at 960. Weighed as 4 px are at 960:
+    let params = TraceParams {
+        radius: 0.075,
+        band_px: 6.0,
+        focal_px: FOCAL,
+        stroke_weight: (80.0_f64 / 960.0).powi(2),
+        ..TraceParams::default()
+    };
+    let trace = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
     let on_leaf = trace.pieces.iter().flat_map(|p| p.pixels.iter()).filter(|p| p[1] >= 23).count();
     assert_eq!(on_leaf, 0, "{} path pixels on the leaf", on_leaf);
     // the same without the focal length (no width measure) does go onto the leaf
-    let params = TraceParams { radius: 0.075, band_px: 6.0, ..TraceParams::default() };
+    let params = TraceParams { focal_px: 0.0, stroke_weight: 1.0, ..params };
     let blind = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
     assert!(blind.pieces.iter().flat_map(|p| p.pixels.iter()).any(|p| p[1] >= 23));
 }
