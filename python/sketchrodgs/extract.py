@@ -323,9 +323,8 @@ def extract_rod(
 
     if working_width is not None and not (isinstance(working_width, (int, np.integer)) and working_width >= 16):
         raise SketchRodGSError(f"working_width: must be a whole number of pixels >= 16, or None, got {working_width!r}")
-    shape = render.index_image.shape if render is not None else (camera.height, camera.width)
-    if shape != (camera.height, camera.width):
-        raise SketchRodGSError(f"render: index image is {shape}, camera is {camera.height}x{camera.width}")
+    if render is not None:
+        _check_render_size(render, camera)
     view = WorkingView.of(camera, working_width)
     try:
         extraction = _extract(
@@ -781,6 +780,13 @@ def _failure(
     return error
 
 
+def _check_render_size(render: RenderResult, camera: Camera) -> None:
+    if render.index_image.shape != (camera.height, camera.width):
+        raise SketchRodGSError(
+            f"render: index image is {render.index_image.shape}, camera is {camera.height}x{camera.width}"
+        )
+
+
 def _check_stroke(stroke: np.ndarray) -> np.ndarray:
     try:
         points = np.ascontiguousarray(stroke, dtype=np.float32)
@@ -802,10 +808,7 @@ def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, ba
     not jump, in world units at its depth; the median over the stroke's samples on the object. A
     view wider than `WORKING_WIDTH` is measured scaled down to it, as `extract_rod` does."""
     stroke = _check_stroke(stroke)
-    if render.index_image.shape != (camera.height, camera.width):
-        raise SketchRodGSError(
-            f"render: index image is {render.index_image.shape}, camera is {camera.height}x{camera.width}"
-        )
+    _check_render_size(render, camera)
     view = WorkingView.of(camera)
     index, depth, opacity, work, _ = _search_inputs(view.render_to_work(render), view.points_to_work(stroke))
     band = float(band_px or 0.0) * view.scale[0]
