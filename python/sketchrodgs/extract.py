@@ -300,8 +300,6 @@ def extract_rod(
             error carries `stroke`, `pixel_path` (what was found) and `lost_at` for drawing it.
         SketchRodGSError: bad arguments (the message names which).
     """
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
     stroke = _check_stroke(stroke)
     for name, value in (("alpha", alpha), ("segment_scale", segment_scale)):
         if not np.isfinite(value) or value < 0:
@@ -341,8 +339,6 @@ def extract_rod(
             attach_size=attach_size,
             recentre=recentre,
             render=None if view.scaled else render,
-            timings=timings,
-            clock=clock,
         )
     except PathNotFoundError as err:
         raise view.failure_to_user(err, stroke) from None
@@ -364,10 +360,10 @@ def _extract(
     attach_size: float | None,
     recentre: bool,
     render: RenderResult | None,
-    timings: dict[str, float],
-    clock: float,
 ) -> Extraction:
     """`extract_rod` on arguments checked, in the view it traces (`WorkingView.work`)."""
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
     given = render is not None
     # The band's tiles (unless the render was given), and where the search asks for them, the
     # layers behind them.

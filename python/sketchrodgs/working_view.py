@@ -4,7 +4,7 @@ it is wider (docs/extraction.md, "Resolution").
 Extraction's rules measure in pixels (the depth gap floor of the width walks, the stroke's
 smoothing, the band), and were set on 960x540 views. A pixel's world size halves when the same view
 is rendered at twice the width, so at 1920x1080 the width walks split a flat stand leg's depths into
-clusters and its radius came out at a quarter. Tracing a larger view on a copy scaled down to 960
+clusters and its radius came out at a third of the 960 px view's. Tracing a larger view on a copy scaled down to 960
 pixels wide makes the rod the same at any resolution, and the work that of a 960-pixel view.
 """
 

@@ -344,8 +344,8 @@ impl<'a> Search<'a> {
 /// The stroke term of Eq. 1, `alpha (D / (W/2))^2` for a node `D` pixels from the stroke in an image
 /// `W` wide, is added to world distances between centres. As it is, the path's balance between the
 /// stroke and the Gaussians depended on the scene's units: the real cases' scenes (a pixel's world
-/// size 0.05-5 thousandths) weighed it 100 times apart, and the cases in units 4 times larger met 7
-/// of 14 targets with 9 misses instead of 8 with 6. So where the focal length is known it is in
+/// size 0.05-5 thousandths) weighed it 100 times apart, and in units 4 times larger 7 of the 14
+/// cases met every target, with 9 misses, instead of 8 with 6. So where the focal length is known it is in
 /// units of this many pixels' world size at the node's depth (docs/extraction.md, "Search").
 pub(crate) const STROKE_TERM_PX: f64 = 3_000.0;
 
