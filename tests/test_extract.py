@@ -465,3 +465,25 @@ def test_a_sprinkle_seen_from_nearer_than_0_2_extracts_with_the_cameras_near_pla
         match=r"background.*nearer to the camera than the near plane \(0\.2\): give --near below 0\.05",
     ):
         extract_rod(donut, dataclasses.replace(near_camera, near=0.2), near_stroke)
+
+
+def test_the_colours_read_are_those_the_front_and_the_layers_behind_show(straight_scene):
+    """The path's colour terms read the colours of the Gaussians shown near the stroke, in the front
+    image and in the layers behind it (a stem behind leaves has its colour only there)."""
+    from sketchrodgs.extract import _shown_colours
+
+    tubes, _ = straight_scene
+    rng = np.random.default_rng(3)
+    n = len(tubes.scene)
+    front = np.where(rng.random((54, 96)) < 0.3, -1, rng.integers(0, n // 2, (54, 96))).astype(np.int32)
+    behind = np.where(rng.random((3, 54, 96)) < 0.3, -1, rng.integers(n // 2, n, (3, 54, 96))).astype(np.int32)
+    stroke = np.array([[30.0, 20.0], [60.0, 30.0]])
+    ids, rgb = _shown_colours(tubes.scene, [front, behind], stroke, reach=5.0)
+    box = (slice(15, 36), slice(25, 66))  # the stroke's box grown by 5 px, its far edge included
+    expected = np.union1d(front[box][front[box] >= 0], behind[(slice(None), *box)][behind[(slice(None), *box)] >= 0])
+    np.testing.assert_array_equal(ids, expected)
+    assert (ids >= n // 2).any()  # the layers behind's own
+    np.testing.assert_array_equal(rgb, tubes.scene.colors_of(expected))
+    front[20, 40] = n
+    with pytest.raises(SketchRodGSError, match=f"Gaussian id {n} out of range for {n} Gaussians"):
+        _shown_colours(tubes.scene, [front], stroke, reach=5.0)

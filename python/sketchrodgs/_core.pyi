@@ -63,6 +63,9 @@ class Trace:
     @property
     def colours(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None: ...
 
+def shown_ids(
+    images: list[npt.NDArray[np.int32]], low: tuple[int, int], high: tuple[int, int], count: int
+) -> npt.NDArray[np.uint32]: ...
 def forward_along_stroke(
     points: npt.NDArray[np.float32], radius_px: npt.NDArray[np.float32], stroke: npt.NDArray[np.float32]
 ) -> npt.NDArray[np.bool_]: ...

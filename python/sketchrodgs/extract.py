@@ -506,8 +506,10 @@ def _trace(
         pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        pixels, ids = _past_far_owners(scene, camera, trace.pieces, radius)
-        path_ids = _near_the_path(pixels, ids, scene.means, camera, radius)
+        pixels = np.concatenate([p.pixels.astype(np.int64) for p in trace.pieces])
+        path = cKDTree(pixels + 0.5)  # the pixels' centres, for how far off each Gaussian lies
+        ids = _past_far_owners(scene, camera, pixels, path, trace.pieces, radius)
+        path_ids = _near_the_path(path, ids, scene.means, camera, radius)
         path_ids = _of_the_part(path_ids, scene, trace.colours)
         path_ids = _forward_only(path_ids, scene.means, camera, trace.clean_stroke, radius)
         # The path hops between Gaussians scattered over the surface; a little smoothing takes out
@@ -605,18 +607,12 @@ def _colours_reach(
 def _shown_colours(
     scene: GaussianScene, index_images: list[np.ndarray], stroke: np.ndarray, reach: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The colours (SH DC term) of the Gaussians that `index_images` show within `reach` pixels of
-    `stroke`'s bounding box: (ids ascending, rgb). The ids come from a mask over all N rows, not a
-    sort of the pixels: with a whole 960x540 render given at 2.27 M Gaussians, np.unique over the
-    image took 70 ms."""
+    """The colours (SH DC term) of the Gaussians that `index_images` ((H, W) or (L, H, W)) show
+    within `reach` pixels of `stroke`'s bounding box: (ids ascending, rgb)."""
     height, width = index_images[0].shape
     low = np.clip(np.floor(stroke.min(axis=0) - reach), 0, [width, height]).astype(int)
     high = np.clip(np.ceil(stroke.max(axis=0) + reach) + 1, 0, [width, height]).astype(int)
-    shown = np.zeros(len(scene), dtype=bool)
-    for image in index_images:
-        near = image[low[1] : high[1], low[0] : high[0]]
-        shown[near[near >= 0]] = True
-    ids = np.flatnonzero(shown).astype(np.uint32)
+    ids = _core.shown_ids(index_images, (int(low[0]), int(low[1])), (int(high[0]), int(high[1])), len(scene))
     return ids, scene.colors_of(ids)
 
 
@@ -627,32 +623,37 @@ def _on_screen(camera: Camera, points: np.ndarray, radius: float) -> tuple[np.nd
 
 
 def _far_off(
-    pixels: np.ndarray, ids: np.ndarray, means: np.ndarray, camera: Camera, radius: float
+    path: cKDTree, ids: np.ndarray, means: np.ndarray, camera: Camera, radius: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per Gaussian of `ids`, how far its centre projects from the nearest of `pixels`, in pixels
-    (infinite behind the camera), and R in pixels at its depth."""
+    """Per Gaussian of `ids`, how far its centre projects from the nearest of the path's pixel
+    centres `path`, in pixels (infinite behind the camera), and R in pixels at its depth."""
     uv, z, radius_px = _on_screen(camera, means[ids], radius)
-    off_path, _ = cKDTree(pixels + 0.5).query(np.where(np.isfinite(uv), uv, -1e9))
+    off_path, _ = path.query(np.where(np.isfinite(uv), uv, -1e9))
     return np.where(z > 0, off_path, np.inf), radius_px
 
 
 def _past_far_owners(
-    scene: GaussianScene, camera: Camera, pieces: list[_core.TracePiece], radius: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The path's pixels (P, 2) and their Gaussians (P,), where a pixel's Gaussian lies far off (its
-    centre more than 2 R from every pixel of the path) replaced by the Gaussian that owns that
-    pixel without it, where that one lies at the part's depth. K is the Gaussian of largest weight:
-    over a sprinkle, a faint icing Gaussian 10 R long, its centre 100 px away, can outweigh each of
-    the sprinkle's Gaussians behind it, though the pixel shows the sprinkle's blue; the rod then
-    missed the sprinkle's upper half (docs/extraction.md, "Gaussians the part hides behind a faint
-    one"). At the part's depth: within the depth gap (3 R), plus the lateral distance as in the
-    depth chain, of the Gaussian of the nearest pixel along the path whose own is not far off: a
-    leaf's Gaussian is far off too, and what it hides is often deeper."""
-    pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
+    scene: GaussianScene,
+    camera: Camera,
+    pixels: np.ndarray,
+    path: cKDTree,
+    pieces: list[_core.TracePiece],
+    radius: float,
+) -> np.ndarray:
+    """The Gaussians (P,) of the path's `pieces` at its `pixels` (P, 2) (their centres in the tree
+    `path`), where a pixel's Gaussian lies far off (its centre more than 2 R from every pixel of the
+    path) replaced by the Gaussian that owns that pixel without it, where that one lies at the
+    part's depth. K is the Gaussian of largest weight: over a sprinkle, a faint icing Gaussian 10 R
+    long, its centre 100 px away, can outweigh each of the sprinkle's Gaussians behind it, though
+    the pixel shows the sprinkle's blue; the rod then missed the sprinkle's upper half
+    (docs/extraction.md, "Gaussians the part hides behind a faint one"). At the part's depth: within
+    the depth gap (3 R), plus the lateral distance as in the depth chain, of the Gaussian of the
+    nearest pixel along the path whose own is not far off: a leaf's Gaussian is far off too, and
+    what it hides is often deeper."""
     ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
     for _ in range(_FAR_OWNER_ROUNDS):
         shown = np.unique(ids)
-        off_path, radius_px = _far_off(pixels, shown, scene.means, camera, radius)
+        off_path, radius_px = _far_off(path, shown, scene.means, camera, radius)
         far = shown[off_path > _NEAR_PIXEL_RADII_WIDE * radius_px]
         owned = np.isin(ids, far)
         at = np.flatnonzero(owned)
@@ -676,23 +677,24 @@ def _past_far_owners(
         if not same_depth.any():
             break
         ids[at[same_depth]] = owner[same_depth]
-    return pixels, ids
+    return ids
 
 
-def _near_the_path(pixels: np.ndarray, ids: np.ndarray, means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
-    """The Gaussians `ids` of the path's `pixels` in order, one visit each, leaving out those whose
-    centre projects more than R (3 px at least) from every pixel of the path: a big Gaussian of what
-    the part touches (the guitar body at a stand's foot, the icing under a sprinkle) can own a pixel
-    at the part's edge while its centre lies to the side, and would hook the rod's end towards it. A
-    big Gaussian of the part itself (a flat stand leg is drawn by a few) has its centre on the path,
-    though far along it from where the path first met it. Where that keeps fewer than half the
-    Gaussians within 2 R (a part of few Gaussians, a sprinkle seen edge-on), those are kept. None
-    farther is ever kept: over one sprinkle a faint icing Gaussian 13 R long owned 101 of the path's
-    119 pixels, its centre 400 px off, and the rod ran there (docs/extraction.md, "Sprinkles from
-    their colour"); too few left makes the rod too short, a clear error."""
+def _near_the_path(path: cKDTree, ids: np.ndarray, means: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
+    """The Gaussians `ids` of the path's pixels (their centres in the tree `path`) in order, one
+    visit each, leaving out those whose centre projects more than R (3 px at least) from every pixel
+    of the path: a big Gaussian of what the part touches (the guitar body at a stand's foot, the
+    icing under a sprinkle) can own a pixel at the part's edge while its centre lies to the side,
+    and would hook the rod's end towards it. A big Gaussian of the part itself (a flat stand leg is
+    drawn by a few) has its centre on the path, though far along it from where the path first met
+    it. Where that keeps fewer than half the Gaussians within 2 R (a part of few Gaussians, a
+    sprinkle seen edge-on), those are kept. None farther is ever kept: over one sprinkle a faint
+    icing Gaussian 13 R long owned 101 of the path's 119 pixels, its centre 400 px off, and the rod
+    ran there (docs/extraction.md, "Sprinkles from their colour"); too few left makes the rod too
+    short, a clear error."""
     _, first = np.unique(ids, return_index=True)
     ids = ids[np.sort(first)]  # first visit of each Gaussian, in path order
-    off_path, radius_px = _far_off(pixels, ids, means, camera, radius)
+    off_path, radius_px = _far_off(path, ids, means, camera, radius)
     near, wide = (
         off_path <= np.maximum(_NEAR_PIXEL_PX, k * radius_px) for k in (_NEAR_PIXEL_RADII, _NEAR_PIXEL_RADII_WIDE)
     )

@@ -1,6 +1,8 @@
 //! The band of pixels around the stroke, each labelled with its nearest depth-compatible stroke
 //! segment (docs/extraction.md, "Search"). Band pixels become the nodes of the search graph.
 
+use rayon::prelude::*;
+
 use crate::IndexImage;
 use crate::stroke::CleanStroke;
 
@@ -41,13 +43,9 @@ impl Band {
         self.pixel.len()
     }
 
-    /// Whether `pixel` is labelled already with a segment at most `distance` away.
-    fn labelled_within(&self, pixel: usize, distance: f32) -> bool {
-        self.node(pixel).is_some_and(|node| self.distance[node] <= distance)
-    }
-
     /// Label `pixel` with `segment` at `distance` (and `arc`) unless a segment at most as far has it:
-    /// strict, so at a shared vertex the earlier segment keeps the pixel.
+    /// strict, so at a shared vertex the earlier segment keeps the pixel (the plain scan of the tests).
+    #[cfg(test)]
     fn offer(&mut self, pixel: usize, segment: usize, distance: f32, arc: f32) {
         match self.node(pixel) {
             None => {
@@ -67,56 +65,135 @@ impl Band {
     }
 }
 
-/// Calls `visit(pixel, t, d²)` for every pixel of segment `i`'s bounding box grown by `band_px`:
-/// `t` the parameter of the nearest point on the segment to the pixel's centre, `d²` the squared
-/// distance to it.
+/// The parameter `t` of the nearest point on the segment from `a` along `ab` (`length2` its squared
+/// length) to the centre of pixel (`row`, `col`), and the squared distance to it.
+fn nearest_on_segment(a: [f32; 2], ab: [f32; 2], length2: f32, row: usize, col: usize) -> (f32, f32) {
+    let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
+    let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
+    let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
+    (t, dx * dx + dy * dy)
+}
+
+/// Calls `visit(row, col, t, d²)` for the pixels in `rows` within `band_px` of segment `i` (and a
+/// few beyond), with `t` and `d²` as `nearest_on_segment` gives them. Each row is scanned over
+/// the columns the band can reach there, a third fewer pixels than the segment's grown box.
 fn scan_segment(
     image: &IndexImage,
     stroke: &CleanStroke,
     i: usize,
     band_px: f32,
-    mut visit: impl FnMut(usize, f32, f32),
+    rows: std::ops::Range<usize>,
+    mut visit: impl FnMut(usize, usize, f32, f32),
 ) {
     let (a, b) = (stroke.points[i], stroke.points[i + 1]);
     let ab = [b[0] - a[0], b[1] - a[1]];
     let length2 = ab[0] * ab[0] + ab[1] * ab[1];
     let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
-    let (x0, x1) =
-        (clip(a[0].min(b[0]) - band_px - 1.0, image.width), clip(a[0].max(b[0]) + band_px + 1.0, image.width));
-    let (y0, y1) =
-        (clip(a[1].min(b[1]) - band_px - 1.0, image.height), clip(a[1].max(b[1]) + band_px + 1.0, image.height));
-    for row in y0..=y1 {
-        for col in x0..=x1 {
-            let (px, py) = (col as f32 + 0.5 - a[0], row as f32 + 0.5 - a[1]);
-            let t = if length2 > 0.0 { ((px * ab[0] + py * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
-            let (dx, dy) = (px - t * ab[0], py - t * ab[1]);
-            visit(row * image.width + col, t, dx * dx + dy * dy);
+    let (low, high) = ([a[0].min(b[0]), a[1].min(b[1])], [a[0].max(b[0]), a[1].max(b[1])]);
+    let (x0, x1) = (clip(low[0] - band_px - 1.0, image.width), clip(high[0] + band_px + 1.0, image.width));
+    let (y0, y1) = (clip(low[1] - band_px - 1.0, image.height), clip(high[1] + band_px + 1.0, image.height));
+    // a pixel within `reach` of the segment lies within `reach` of its rows' span across, and so
+    // within sqrt(reach² - dy²) of its columns' span along the row (a pixel of margin for rounding)
+    let reach = band_px + 1.0;
+    for row in y0.max(rows.start)..=y1.min(rows.end.saturating_sub(1)) {
+        let centre = row as f32 + 0.5;
+        let dy = (low[1] - centre).max(centre - high[1]).max(0.0);
+        if dy > reach {
+            continue;
+        }
+        let half = (reach * reach - dy * dy).sqrt() + 1.0;
+        let (from, to) = (clip(low[0] - half - 0.5, image.width).max(x0), clip(high[0] + half, image.width).min(x1));
+        for col in from..=to {
+            let (t, d2) = nearest_on_segment(a, ab, length2, row, col);
+            visit(row, col, t, d2);
         }
     }
 }
 
+/// Rows per strip of the band's labelling: strips are labelled in parallel.
+const STRIP_ROWS: usize = 16;
+
+/// A pixel's label while strips are labelled: its nearest segment so far, the distance and arc
+/// there, and the first segment that labelled it (which orders the nodes).
+#[derive(Clone, Copy)]
+struct Label {
+    segment: u32,
+    first: u32,
+    distance: f32,
+    arc: f32,
+}
+
+const UNLABELLED: Label = Label { segment: u32::MAX, first: u32::MAX, distance: f32::INFINITY, arc: 0.0 };
+
 /// Label each object pixel within `band_px` of the stroke with its nearest segment among those where
 /// the object's expected depth (the clean stroke's depth, interpolated) is within `depth_gap` of the
-/// pixel's `Z`. Each segment scans only its own bounding box.
+/// pixel's `Z`; at equal distances the earlier segment. Each segment scans only its own bounding
+/// box. Nodes are numbered as a scan of segment after segment would number them on first
+/// labelling: by that first segment, then by pixel (the search breaks cost ties by node). Strips of
+/// rows are labelled in parallel, each taking the segments in order.
 pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32, depth_gap: f32) -> Band {
-    let mut band = Band::empty(image.width * image.height);
+    let width = image.width;
     // surely beyond the band, without a square root (the margin covers the rounding)
     let beyond2 = band_px * band_px * 1.001 + 1e-6;
-    for i in 0..stroke.segment_count() {
-        scan_segment(image, stroke, i, band_px, |p, t, d2| {
-            if d2 > beyond2 {
-                return;
+    // the rows and columns any segment's box reaches
+    let (mut low, mut high) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for p in &stroke.points {
+        (low, high) = ([low[0].min(p[0]), low[1].min(p[1])], [high[0].max(p[0]), high[1].max(p[1])]);
+    }
+    let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
+    let (x0, x1) = (clip(low[0] - band_px - 1.0, width), clip(high[0] + band_px + 1.0, width));
+    let (y0, y1) = (clip(low[1] - band_px - 1.0, image.height), clip(high[1] + band_px + 1.0, image.height));
+    let span = x1 + 1 - x0;
+    let strips: Vec<Vec<(usize, Label)>> = (y0..=y1)
+        .step_by(STRIP_ROWS)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|start| {
+            let rows = start..(start + STRIP_ROWS).min(y1 + 1);
+            let mut labels = vec![UNLABELLED; rows.len() * span];
+            for i in 0..stroke.segment_count() {
+                scan_segment(image, stroke, i, band_px, rows.clone(), |row, col, t, d2| {
+                    if d2 > beyond2 {
+                        return;
+                    }
+                    let d = d2.sqrt();
+                    // the image is read only where the label could change: the boxes overlap, and
+                    // most of a box lies beyond the band or nearer an earlier segment
+                    let label = &mut labels[(row - rows.start) * span + col - x0];
+                    if d > band_px || label.distance <= d {
+                        return;
+                    }
+                    let p = row * width + col;
+                    if image.id_at(p) >= 0 && (image.depth(p) - stroke.depth_at(i, t)).abs() <= depth_gap {
+                        let first = if label.segment == u32::MAX { i as u32 } else { label.first };
+                        *label = Label { segment: i as u32, first, distance: d, arc: stroke.arc_at(i, t) };
+                    }
+                });
             }
-            let d = d2.sqrt();
-            // the image is read only where the label could change: the boxes overlap, and most
-            // of a box lies beyond the band or nearer an earlier segment
-            if d > band_px || band.labelled_within(p, d) {
-                return;
-            }
-            if image.id_at(p) >= 0 && (image.depth(p) - stroke.depth_at(i, t)).abs() <= depth_gap {
-                band.offer(p, i, d, stroke.arc_at(i, t));
-            }
-        });
+            let pixel = |k: usize| (rows.start + k / span) * width + x0 + k % span;
+            labels.iter().enumerate().filter(|(_, l)| l.segment != u32::MAX).map(|(k, &l)| (pixel(k), l)).collect()
+        })
+        .collect();
+    // number the nodes by first segment, then pixel: a counting sort of the pixels in order
+    let mut starts = vec![0usize; stroke.segment_count() + 1];
+    for &(_, label) in strips.iter().flatten() {
+        starts[label.first as usize + 1] += 1;
+    }
+    for k in 1..starts.len() {
+        starts[k] += starts[k - 1];
+    }
+    let count = starts[starts.len() - 1];
+    let mut band = Band::empty(width * image.height);
+    (band.pixel, band.segment, band.distance, band.arc) =
+        (vec![0; count], vec![0; count], vec![0.0; count], vec![0.0; count]);
+    for &(p, label) in strips.iter().flatten() {
+        let node = starts[label.first as usize];
+        starts[label.first as usize] += 1;
+        band.node_of_pixel[p] = node as u32;
+        band.pixel[node] = p as u32;
+        band.segment[node] = label.segment;
+        band.distance[node] = label.distance;
+        band.arc[node] = label.arc;
     }
     band
 }
@@ -127,19 +204,24 @@ mod tests {
     use super::*;
     use crate::stroke::clean_stroke;
 
-    /// The labelling as first written: every pixel of each segment's box read, then judged.
+    /// The labelling as first written, over every pixel of the image for each segment, read and
+    /// judged, segment after segment.
     fn label_band_reading_every_pixel(image: &IndexImage, stroke: &CleanStroke, band_px: f32, gap: f32) -> Band {
         let mut band = Band::empty(image.width * image.height);
         for i in 0..stroke.segment_count() {
-            scan_segment(image, stroke, i, band_px, |p, t, d2| {
+            let (a, b) = (stroke.points[i], stroke.points[i + 1]);
+            let ab = [b[0] - a[0], b[1] - a[1]];
+            for p in 0..image.width * image.height {
+                let (row, col) = (p / image.width, p % image.width);
+                let (t, d2) = nearest_on_segment(a, ab, ab[0] * ab[0] + ab[1] * ab[1], row, col);
                 if image.id_at(p) < 0 || (image.depth(p) - stroke.depth_at(i, t)).abs() > gap {
-                    return;
+                    continue;
                 }
                 let d = d2.sqrt();
                 if d <= band_px {
                     band.offer(p, i, d, stroke.arc_at(i, t));
                 }
-            });
+            }
         }
         band
     }

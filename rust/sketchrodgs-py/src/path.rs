@@ -1,9 +1,9 @@
-//! Bindings for `sketchrodgs-path`: `_core.trace_stroke(...)`.
+//! Bindings for `sketchrodgs-path`: `_core.trace_stroke(...)`, and `_core.shown_ids(...)` for its colours.
 
 use numpy::ndarray::Array2;
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-    PyReadwriteArray2, PyUntypedArrayMethods,
+    PyReadonlyArrayDyn, PyReadwriteArray2, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use sketchrodgs_path::{IndexImage, PathError, PieceEnd, Rendered, TraceParams};
@@ -314,7 +314,57 @@ fn forward_along_stroke<'py>(
     Ok(sketchrodgs_path::forward_along_stroke(points, radius_px, stroke).into_pyarray(py))
 }
 
+/// The ids (ascending, uint32) that `images` (each (H, W) or (L, H, W) int32, -1 where nothing is
+/// shown) show in the pixel box `low` to `high` (x, y; `high` excluded), of `count` Gaussians: one
+/// pass over the pixels and a bit per Gaussian, where NumPy's mask over all rows took a millisecond
+/// or two on a whole 960x540 view.
+#[pyfunction]
+fn shown_ids<'py>(
+    py: Python<'py>,
+    images: Vec<PyReadonlyArrayDyn<'py, i32>>,
+    low: [usize; 2],
+    high: [usize; 2],
+    count: usize,
+) -> PyResult<Bound<'py, PyArray1<u32>>> {
+    let mut shown = vec![0u64; count.div_ceil(64)];
+    for image in &images {
+        let shape = image.shape();
+        let (layers, height, width) = match *shape {
+            [h, w] => (1, h, w),
+            [l, h, w] => (l, h, w),
+            _ => {
+                return Err(SketchRodGSError::new_err(format!(
+                    "index image: expected (H, W) or (L, H, W), got {shape:?}"
+                )));
+            }
+        };
+        let pixels = contiguous(image, "index image")?;
+        let (x0, x1) = (low[0].min(width), high[0].min(width));
+        for row in (0..layers).flat_map(|l| (low[1].min(height)..high[1].min(height)).map(move |r| l * height + r)) {
+            for &id in &pixels[row * width + x0..row * width + x1.max(x0)] {
+                if id < 0 {
+                    continue;
+                }
+                let id = id as usize;
+                if id >= count {
+                    return Err(SketchRodGSError::new_err(format!(
+                        "index image: Gaussian id {id} out of range for {count} Gaussians"
+                    )));
+                }
+                shown[id / 64] |= 1 << (id % 64);
+            }
+        }
+    }
+    let ids: Vec<u32> = shown
+        .iter()
+        .enumerate()
+        .flat_map(|(word, &bits)| (0..64).filter(move |b| bits >> b & 1 == 1).map(move |b| (word * 64 + b) as u32))
+        .collect();
+    Ok(ids.into_pyarray(py))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(shown_ids, m)?)?;
     m.add_function(wrap_pyfunction!(forward_along_stroke, m)?)?;
     m.add_function(wrap_pyfunction!(trace_stroke, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_radius, m)?)?;
