@@ -59,6 +59,31 @@ pub enum PathError {
     BadParameter { name: &'static str, value: f64 },
     #[error("colours: expected ascending Gaussian ids, one per colour row, got {ids} ids and {rows} rows")]
     Colours { ids: usize, rows: usize },
+    #[error(
+        "radius {radius} is {radius_px:.0} pixels at the stroke's depth, wider than the {width}x{height} image: give a smaller radius (in the scene's units)"
+    )]
+    RadiusWiderThanImage { radius: f32, radius_px: f32, width: usize, height: usize },
+    #[error("band_px {band_px} is wider than the {width}x{height} image: give a smaller band")]
+    BandWiderThanImage { band_px: f32, width: usize, height: usize },
+    #[error(
+        "{image}: the depth at pixel ({col}, {row}) is {depth} where a Gaussian is shown; it must be finite and > 0"
+    )]
+    BadDepth { image: String, col: usize, row: usize, depth: f32 },
+}
+
+/// An error naming the first pixel (of the layers behind if `layers`) where `index` shows a
+/// Gaussian at a depth that is not finite and positive: a cost made of such depths could be
+/// negative, and the search's predecessors then run in a circle (a depth of -2 made the path's
+/// walk back grow until memory ran out).
+fn check_depths(layers: bool, width: usize, height: usize, index: &[i32], depth: &[f32]) -> Result<(), PathError> {
+    match index.iter().zip(depth).position(|(&i, &z)| i >= 0 && !(z > 0.0 && z < f32::INFINITY)) {
+        None => Ok(()),
+        Some(p) => {
+            let (layer, col, row) = (p / (width * height), p % width, p / width % height);
+            let image = if layers { format!("layer {layer} behind the index image") } else { "index image".into() };
+            Err(PathError::BadDepth { image, col, row, depth: depth[p] })
+        }
+    }
 }
 
 /// The rendered index image `K` and its depth `Z` (row-major, `[row * width + col]`).
@@ -131,6 +156,7 @@ impl<'a> IndexImage<'a> {
         if width == 0 || height == 0 || pixels != Some(index.len()) || pixels != Some(depth.len()) {
             return Err(PathError::ImageSize { width, height, index: index.len(), depth: depth.len() });
         }
+        check_depths(false, width, height, index, depth)?;
         Ok(Self {
             width,
             height,
@@ -152,6 +178,7 @@ impl<'a> IndexImage<'a> {
         if index.len() != count * pixels || depth.len() != index.len() || alpha.len() != index.len() {
             return Err(PathError::BehindSize { pixels, index: index.len(), depth: depth.len(), alpha: alpha.len() });
         }
+        check_depths(true, self.width, self.height, index, depth)?;
         Ok(Self { behind: Some(Behind { count, index, depth, alpha }), ..self })
     }
 
@@ -430,8 +457,10 @@ impl TraceParams {
     }
 
     /// The parameters checked, with the default band filled in (`radius_px`: the part's radius in
-    /// pixels at the stroke's depth, 0 when unknown).
-    fn validated(&self, width: usize, radius_px: f32) -> Result<Self, PathError> {
+    /// pixels at the stroke's depth, 0 when unknown). A radius or a band wider than the image is an
+    /// error: the band's labelling and the stroke's surfaces would read the whole image at every
+    /// sample (a radius of 1e6 in a scene of unit size took minutes).
+    fn validated(&self, width: usize, height: usize, radius_px: f32) -> Result<Self, PathError> {
         let check = |name: &'static str, value: f64| {
             if value.is_finite() && value > 0.0 { Ok(()) } else { Err(PathError::BadParameter { name, value }) }
         };
@@ -443,8 +472,16 @@ impl TraceParams {
         if !(self.stroke_weight.is_finite() && self.stroke_weight >= 0.0) {
             return Err(PathError::BadParameter { name: "stroke_weight", value: self.stroke_weight });
         }
+        let side = width.max(height) as f32;
+        // (the default band reaches `BAND_RADII` radii: past the image, the radius is the cause)
+        if BAND_RADII * radius_px > side {
+            return Err(PathError::RadiusWiderThanImage { radius: self.radius, radius_px, width, height });
+        }
         let band_px = if self.band_px == 0.0 { Self::default_band_px(width, radius_px) } else { self.band_px };
         check("band_px", f64::from(band_px))?;
+        if band_px > side {
+            return Err(PathError::BandWiderThanImage { band_px, width, height });
+        }
         Ok(Self { band_px, ..*self })
     }
 }

@@ -79,7 +79,7 @@ pub fn trace_stroke(
         Some(z) if z > 0.0 && params.focal_px > 0.0 => params.radius * params.focal_px / z,
         _ => 0.0,
     };
-    let params = params.validated(image.width, radius_px)?;
+    let params = params.validated(image.width, image.height, radius_px)?;
     let id = image.max_id();
     if id >= 0 && id as usize >= centres.len() {
         return Err(PathError::IndexOutOfRange { id, count: centres.len() });

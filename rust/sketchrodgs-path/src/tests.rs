@@ -218,6 +218,14 @@ fn bad_strokes_and_parameters_are_errors() {
             Err(PathError::BadParameter { name: "radius", .. })
         ));
     }
+    // a radius or a band wider than the image (a radius in the wrong units) is an error, not minutes
+    // of reading the whole image at every sample: R = 10 is 200 px at depth 5
+    let wide = scene.trace(&[[2.5, 20.5], [77.5, 20.5]], 10.0).unwrap_err();
+    assert!(matches!(wide, PathError::RadiusWiderThanImage { width: 80, height: 40, .. }), "{wide:?}");
+    assert!(wide.to_string().starts_with("radius 10 is 200 pixels at the stroke's depth, wider than the 80x40 image"));
+    let params = TraceParams { radius: 0.05, band_px: 81.0, focal_px: FOCAL, ..TraceParams::default() };
+    let band = trace_stroke(&scene.image(), &scene.centres, &[[2.5, 20.5], [77.5, 20.5]], &params).unwrap_err();
+    assert_eq!(band.to_string(), "band_px 81 is wider than the 80x40 image: give a smaller band");
 }
 
 #[test]
@@ -228,6 +236,19 @@ fn malformed_images_are_errors() {
     let image = IndexImage::new(4, 1, &index, &[1.0; 4]).unwrap();
     let err = trace_stroke(&image, &[[0.0; 3]; 3], &[[0.5, 0.5], [3.5, 0.5]], &TraceParams::default()).unwrap_err();
     assert_eq!(err, PathError::IndexOutOfRange { id: 7, count: 3 });
+    // a shown Gaussian's depth must be finite and > 0 (background pixels may hold anything)
+    for bad in [0.0, -2.0, f32::NAN, f32::INFINITY] {
+        let depth = [1.0, bad, 1.0, 1.0, f32::NAN, 1.0];
+        let err = IndexImage::new(3, 2, &[0, 1, 2, 0, -1, 1], &depth).unwrap_err();
+        assert!(matches!(err, PathError::BadDepth { col: 1, row: 0, .. }), "{err:?}");
+        assert!(err.to_string().starts_with("index image: the depth at pixel (1, 0) is "), "{err}");
+    }
+    let image = IndexImage::new(2, 2, &[0; 4], &[1.0; 4]).unwrap();
+    let err = image.with_behind(&[-1, -1, -1, -1, -1, -1, 0, -1], &[0.0; 8], &[1.0; 8]).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "layer 1 behind the index image: the depth at pixel (0, 1) is 0 where a Gaussian is shown; it must be finite and > 0"
+    );
 }
 
 #[test]
