@@ -31,6 +31,9 @@ from sketchrodgs.render import render
 
 CAMERA = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, 1, 0), width=960, height=540, fov_y_deg=40)
 REPEAT = 7
+# The 30 ms target's table: on a shared machine the best of 7 still varied by 2-3 ms between runs
+# (30.0 and 30.9 ms for the rope), the best of 15 by less.
+TARGET_REPEAT = 15
 
 
 def wide_rope(u: np.ndarray) -> np.ndarray:
@@ -50,7 +53,7 @@ def main() -> None:
         stroke = uv[np.r_[0 : len(uv) - 1 : 25, len(uv) - 1]]
         images = render(tubes.scene, CAMERA, outputs="index")
         runs = []
-        for _ in range(REPEAT):
+        for _ in range(TARGET_REPEAT):
             start = time.perf_counter()
             ex = extract_rod(tubes.scene, CAMERA, stroke, radius=tubes.radius, render=images)
             runs.append((time.perf_counter() - start, ex.timings))
@@ -79,7 +82,7 @@ def main() -> None:
             ]
         )
     print_table(
-        f"extract_rod at {CAMERA.width}x{CAMERA.height}, K and Z given (best of {REPEAT})",
+        f"extract_rod at {CAMERA.width}x{CAMERA.height}, K and Z given (best of {TARGET_REPEAT})",
         [
             "case",
             "gaussians",
