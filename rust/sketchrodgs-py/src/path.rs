@@ -355,11 +355,14 @@ fn shown_ids<'py>(
             }
         }
     }
-    let ids: Vec<u32> = shown
-        .iter()
-        .enumerate()
-        .flat_map(|(word, &bits)| (0..64).filter(move |b| bits >> b & 1 == 1).map(move |b| (word * 64 + b) as u32))
-        .collect();
+    let mut ids = Vec::new();
+    for (word, &bits) in shown.iter().enumerate() {
+        let mut bits = bits;
+        while bits != 0 {
+            ids.push((word * 64 + bits.trailing_zeros() as usize) as u32);
+            bits &= bits - 1; // the lowest set bit cleared
+        }
+    }
     Ok(ids.into_pyarray(py))
 }
 
