@@ -79,9 +79,9 @@ def test_bad_input_is_an_error_or_an_answer_never_a_panic(seed):
 
 
 def test_a_radius_wider_than_the_image_is_refused_at_once():
-    """A stroke that turns straight back has no direction at its turn; the width walks there stayed on
-    their pixel, and with a radius of 1e30 they never ended (memory ran out). Such a radius is
-    refused before any walk now, and walks stop within the image besides."""
+    """A radius in the wrong units made the band cover the whole image at every stroke sample
+    (minutes); such a radius is refused before any reading of the image. The stroke turns straight
+    back, where it has no direction and a width walk stays on its pixel."""
     index = np.zeros((20, 30), np.int32)
     depth = np.ones((20, 30), np.float32)
     stroke = np.array([[5.0, 10.0], [25.0, 10.0], [5.0, 10.0]], np.float32)

@@ -72,8 +72,7 @@ impl Walks {
             *silhouette = f32::NEG_INFINITY;
             let (mut low, mut high, mut misses) = (z0, z0, 0);
             // no walk leaves the image later than this; where the stroke has no direction (a
-            // zero normal) a walk stays on its pixel, and one wider than the image (a radius of
-            // 1e30) would have pushed that pixel until memory ran out
+            // zero normal) a walk stays on its pixel, and only its length in radii bounds it
             for k in 1..=max_px.min(image.width + image.height) {
                 let (x, y) = (col + sign * k as f32 * normal[0], row + sign * k as f32 * normal[1]);
                 let Some(q) = image.pixel_at(x, y) else {
