@@ -507,8 +507,9 @@ def _trace(
         if flip:
             pixel_path = [p[::-1] for p in pixel_path[::-1]]
         pixels = np.concatenate([p.pixels.astype(np.int64) for p in trace.pieces])
+        ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in trace.pieces])
         path = cKDTree(pixels + 0.5)  # the pixels' centres, for how far off each Gaussian lies
-        ids = _past_far_owners(scene, camera, pixels, path, trace.pieces, radius)
+        ids = _past_far_owners(scene, camera, pixels, ids, path, radius)
         path_ids = _near_the_path(path, ids, scene.means, camera, radius)
         path_ids = _of_the_part(path_ids, scene, trace.colours)
         path_ids = _forward_only(path_ids, scene.means, camera, trace.clean_stroke, radius)
@@ -636,21 +637,20 @@ def _past_far_owners(
     scene: GaussianScene,
     camera: Camera,
     pixels: np.ndarray,
+    ids: np.ndarray,
     path: cKDTree,
-    pieces: list[_core.TracePiece],
     radius: float,
 ) -> np.ndarray:
-    """The Gaussians (P,) of the path's `pieces` at its `pixels` (P, 2) (their centres in the tree
-    `path`), where a pixel's Gaussian lies far off (its centre more than 2 R from every pixel of the
-    path) replaced by the Gaussian that owns that pixel without it, where that one lies at the
-    part's depth. K is the Gaussian of largest weight: over a sprinkle, a faint icing Gaussian 10 R
-    long, its centre 100 px away, can outweigh each of the sprinkle's Gaussians behind it, though
-    the pixel shows the sprinkle's blue; the rod then missed the sprinkle's upper half
+    """The Gaussians `ids` (P,) of the path's `pixels` (P, 2) (their centres in the tree `path`),
+    where a pixel's Gaussian lies far off (its centre more than 2 R from every pixel of the path)
+    replaced by the Gaussian that owns that pixel without it, where that one lies at the part's
+    depth. K is the Gaussian of largest weight: over a sprinkle, a faint icing Gaussian 10 R long,
+    its centre 100 px away, can outweigh each of the sprinkle's Gaussians behind it, though the
+    pixel shows the sprinkle's blue; the rod then missed the sprinkle's upper half
     (docs/extraction.md, "Gaussians the part hides behind a faint one"). At the part's depth: within
     the depth gap (3 R), plus the lateral distance as in the depth chain, of the Gaussian of the
     nearest pixel along the path whose own is not far off: a leaf's Gaussian is far off too, and
-    what it hides is often deeper."""
-    ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
+    what it hides is often deeper. `ids` is changed in place."""
     for _ in range(_FAR_OWNER_ROUNDS):
         shown = np.unique(ids)
         off_path, radius_px = _far_off(path, shown, scene.means, camera, radius)

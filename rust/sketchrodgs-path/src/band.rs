@@ -74,6 +74,21 @@ fn nearest_on_segment(a: [f32; 2], ab: [f32; 2], length2: f32, row: usize, col: 
     (t, dx * dx + dy * dy)
 }
 
+/// A coordinate clamped into `0..size` pixels.
+fn clip(v: f32, size: usize) -> usize {
+    v.clamp(0.0, size as f32 - 1.0) as usize
+}
+
+/// The pixels (first and last column and row, inclusive) of the box `low` to `high` grown by
+/// `band_px` and a pixel, within the image.
+fn grown_box(image: &IndexImage, low: [f32; 2], high: [f32; 2], band_px: f32) -> ([usize; 2], [usize; 2]) {
+    let reach = band_px + 1.0;
+    (
+        [clip(low[0] - reach, image.width), clip(low[1] - reach, image.height)],
+        [clip(high[0] + reach, image.width), clip(high[1] + reach, image.height)],
+    )
+}
+
 /// Calls `visit(row, col, t, d²)` for the pixels in `rows` within `band_px` of segment `i` (and a
 /// few beyond), with `t` and `d²` as `nearest_on_segment` gives them. Each row is scanned over
 /// the columns the band can reach there, a third fewer pixels than the segment's grown box.
@@ -88,10 +103,8 @@ fn scan_segment(
     let (a, b) = (stroke.points[i], stroke.points[i + 1]);
     let ab = [b[0] - a[0], b[1] - a[1]];
     let length2 = ab[0] * ab[0] + ab[1] * ab[1];
-    let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
     let (low, high) = ([a[0].min(b[0]), a[1].min(b[1])], [a[0].max(b[0]), a[1].max(b[1])]);
-    let (x0, x1) = (clip(low[0] - band_px - 1.0, image.width), clip(high[0] + band_px + 1.0, image.width));
-    let (y0, y1) = (clip(low[1] - band_px - 1.0, image.height), clip(high[1] + band_px + 1.0, image.height));
+    let ([x0, y0], [x1, y1]) = grown_box(image, low, high, band_px);
     // a pixel within `reach` of the segment lies within `reach` of its rows' span across, and so
     // within sqrt(reach² - dy²) of its columns' span along the row (a pixel of margin for rounding)
     let reach = band_px + 1.0;
@@ -140,9 +153,7 @@ pub(crate) fn label_band(image: &IndexImage, stroke: &CleanStroke, band_px: f32,
     for p in &stroke.points {
         (low, high) = ([low[0].min(p[0]), low[1].min(p[1])], [high[0].max(p[0]), high[1].max(p[1])]);
     }
-    let clip = |v: f32, size: usize| v.clamp(0.0, size as f32 - 1.0) as usize;
-    let (x0, x1) = (clip(low[0] - band_px - 1.0, width), clip(high[0] + band_px + 1.0, width));
-    let (y0, y1) = (clip(low[1] - band_px - 1.0, image.height), clip(high[1] + band_px + 1.0, image.height));
+    let ([x0, y0], [x1, y1]) = grown_box(image, low, high, band_px);
     let span = x1 + 1 - x0;
     let strips: Vec<Vec<(usize, Label)>> = (y0..=y1)
         .step_by(STRIP_ROWS)

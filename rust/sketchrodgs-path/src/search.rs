@@ -275,7 +275,7 @@ impl<'a> Search<'a> {
         self.cost[start] = 0.0;
         self.touched.push(start);
         heap.push(Reverse((0.0_f64.to_bits(), start as u32)));
-        let mut furthest = (start, self.band.arc[start]);
+        let mut furthest = (start, self.nodes[start].arc);
         while let Some(Reverse((bits, a))) = heap.pop() {
             let (cost, a) = (f64::from_bits(bits), a as usize);
             if cost > self.cost[a] {
@@ -284,13 +284,12 @@ impl<'a> Search<'a> {
             if a == goal {
                 return (goal, true);
             }
-            let progress = self.band.arc[a];
-            if progress > furthest.1 {
-                furthest = (a, progress);
+            let node_a = self.nodes[a];
+            if node_a.arc > furthest.1 {
+                furthest = (a, node_a.arc);
             }
             let pixel = self.band.pixel[a] as usize;
             let (col, row) = ((pixel % self.image.width) as i64, (pixel / self.image.width) as i64);
-            let node_a = self.nodes[a];
             for (dx, dy) in NEIGHBOURS {
                 let (x, y) = (col + dx, row + dy);
                 if x < 0 || y < 0 || x >= width || y >= height {
