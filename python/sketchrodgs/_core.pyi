@@ -92,6 +92,7 @@ def continuation(
     size: float,
     link: float,
 ) -> npt.NDArray[np.int64]: ...
+def median_neighbour_distance(points: npt.NDArray[np.float32], k: int, samples: int) -> float | None: ...
 def detours(
     points: npt.NDArray[np.float64],
     uv: npt.NDArray[np.float64],

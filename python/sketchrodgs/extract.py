@@ -418,7 +418,8 @@ def _extract(
     points = pl.resample(points, radius / 2)
     if recentre:
         # on a surface of another colour, the axis is the part's Gaussians' only (`_of_the_part`)
-        nearby = scene.means[_of_the_part(pl.near_box(points, scene.means, 2.5 * radius), scene, trace.colours)]
+        part = _of_the_part(pl.near_box(points, scene.means, 2.5 * radius), scene, trace.colours)
+        nearby = np.take(scene.means, part, axis=0)  # faster than `means[part]` (docs/extraction.md, "Speed")
         points = pl.recentre(points, nearby, radius)
     points = pl.smooth_axis(points, radius, smoothing)
     points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2])

@@ -748,6 +748,72 @@ fn part_link(grid: &Grid, spacings: f32, link_min: f32, link_max: f32) -> f32 {
     (spacings * *median).clamp(link_min, link_max)
 }
 
+/// The median, over a sample of `points`, of the distance from each to its `k`-th nearest other
+/// point: the spacing from which the continuations and the strays take their link
+/// (python/sketchrodgs/segment.py, `_link`). The sample is every `points.len() / samples`-th point
+/// (every point if there are fewer). Distances are `f64`, summed over x, y, z in that order before
+/// the square root, as scipy's k-d tree sums them, so the result is the one its k-nearest query
+/// gives. `None` for fewer than `k + 1` points or `k` 0.
+///
+/// The points are sorted along their longest extent; each sample scans outwards from its place
+/// in that order until that coordinate alone lies farther than its `k`-th nearest so far (a part
+/// is long and thin, so a scan meets few points that are not near).
+pub fn median_neighbour_distance(points: &[[f32; 3]], k: usize, samples: usize) -> Option<f64> {
+    let n = points.len();
+    if k == 0 || n <= k {
+        return None;
+    }
+    let points: Vec<[f64; 3]> = points.iter().map(|p| p.map(f64::from)).collect();
+    let extent = |a: usize| {
+        let (low, high) =
+            points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| (l.min(p[a]), h.max(p[a])));
+        high - low
+    };
+    let axis = (0..3).fold(0, |best, a| if extent(a) > extent(best) { a } else { best });
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_unstable_by(|&a, &b| points[a][axis].total_cmp(&points[b][axis]));
+    let mut place = vec![0; n];
+    for (at, &i) in order.iter().enumerate() {
+        place[i] = at;
+    }
+    let sample: Vec<usize> = (0..n).step_by((n / samples.max(1)).max(1)).collect();
+    let mut kth: Vec<f64> = sample
+        .par_iter()
+        .map(|&i| {
+            let q = points[i];
+            let mut nearest = vec![f64::INFINITY; k]; // squared, ascending
+            let mut try_point = |j: usize| -> bool {
+                let p = points[j];
+                let along = p[axis] - q[axis];
+                if along * along > nearest[k - 1] {
+                    return false; // this one and all beyond it on this side are farther
+                }
+                let (dx, dy, dz) = (p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+                let d = dx * dx + dy * dy + dz * dz;
+                if d < nearest[k - 1] {
+                    nearest[k - 1] = d;
+                    nearest.sort_unstable_by(f64::total_cmp);
+                }
+                true
+            };
+            for &j in &order[place[i] + 1..] {
+                if !try_point(j) {
+                    break;
+                }
+            }
+            for &j in order[..place[i]].iter().rev() {
+                if !try_point(j) {
+                    break;
+                }
+            }
+            nearest[k - 1].sqrt()
+        })
+        .collect();
+    kth.sort_unstable_by(f64::total_cmp);
+    let middle = kth.len() / 2;
+    Some(if kth.len() % 2 == 1 { kth[middle] } else { (kth[middle - 1] + kth[middle]) / 2.0 })
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -882,6 +948,44 @@ mod tests {
             (state >> 33) as f32 / (1u64 << 31) as f32
         };
         (0..n).map(|_| [next(), next(), next() * 0.2]).collect()
+    }
+
+    #[test]
+    fn the_median_neighbour_distance_is_that_of_a_search_of_every_pair() {
+        // a cloud, a thin noisy helix (the sort-and-scan's usual case) and points with duplicates
+        let helix: Vec<[f32; 3]> = cloud(1500, 3)
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let s = i as f32 / 1500.0;
+                [(6.0 * s).cos() + 0.01 * p[0], (6.0 * s).sin() + 0.01 * p[1], 3.0 * s + 0.01 * p[2]]
+            })
+            .collect();
+        let duplicated: Vec<[f32; 3]> = cloud(700, 5).iter().map(|p| p.map(|c| (c * 8.0).round())).collect();
+        for (points, k, samples) in
+            [(cloud(2000, 9), 4, 500), (helix, 4, 500), (duplicated, 4, 100), (cloud(9, 1), 3, 500)]
+        {
+            let kth = |i: usize| {
+                let q = points[i].map(f64::from);
+                let mut d: Vec<f64> = (0..points.len())
+                    .filter(|&j| j != i)
+                    .map(|j| {
+                        let p = points[j].map(f64::from);
+                        let (dx, dy, dz) = (p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+                        dx * dx + dy * dy + dz * dz
+                    })
+                    .collect();
+                d.sort_unstable_by(f64::total_cmp);
+                d[k - 1].sqrt()
+            };
+            let mut all: Vec<f64> = (0..points.len()).step_by((points.len() / samples).max(1)).map(kth).collect();
+            all.sort_unstable_by(f64::total_cmp);
+            let m = all.len() / 2;
+            let expected = if all.len() % 2 == 1 { all[m] } else { (all[m - 1] + all[m]) / 2.0 };
+            assert_eq!(median_neighbour_distance(&points, k, samples), Some(expected));
+        }
+        assert_eq!(median_neighbour_distance(&cloud(4, 1), 4, 500), None);
+        assert_eq!(median_neighbour_distance(&cloud(40, 1), 0, 500), None);
     }
 
     #[test]

@@ -1,11 +1,12 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
 //! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`, `_core.continuation(...)`,
-//! `_core.detours(...)`.
+//! `_core.detours(...)`, `_core.median_neighbour_distance(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use sketchrodgs_polyline::continuation as past_end;
 use sketchrodgs_polyline::detours::{BumpLimits, DetourLimits};
+use sketchrodgs_polyline::proximity;
 use sketchrodgs_polyline::segment::{self, SegmentParams};
 
 use crate::arrays::{as_rows, check_shape, contiguous};
@@ -189,6 +190,25 @@ fn continuation<'py>(
     Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
 }
 
+/// The median over a sample of `points` (N, 3) float32 (every `N // samples`-th) of the distance
+/// to each one's `k`-th nearest other point, in float64
+/// (`sketchrodgs_polyline::proximity::median_neighbour_distance`); None for N <= k.
+#[pyfunction]
+fn median_neighbour_distance<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    k: usize,
+    samples: usize,
+) -> PyResult<Option<f64>> {
+    let points = points.try_readonly()?;
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(SketchRodGSError::new_err(format!("points: row {i} is not finite")));
+    }
+    run_parallel(py, "median_neighbour_distance", || proximity::median_neighbour_distance(points, k, samples))
+}
+
 /// The detours of the axis `points` (M, 3) float64 seen at `uv` (M, 2) float64 with `radius_px`
 /// (M,) float64 (`sketchrodgs_polyline::detours::detours`; the limits in radii, `back_ratio` a
 /// ratio): (K, 2) int64, each row the first and last point of a stretch to put onto its chord.
@@ -283,5 +303,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(continuation, m)?)?;
     m.add_function(wrap_pyfunction!(detours, m)?)?;
     m.add_function(wrap_pyfunction!(bumps, m)?)?;
+    m.add_function(wrap_pyfunction!(median_neighbour_distance, m)?)?;
     Ok(())
 }
