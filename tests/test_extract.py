@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from conftest import DATA, sprinkle_close_up
 from sketchrodgs import Camera, GaussianScene, PathNotFoundError, SketchRodGSError, load_scene, synthetic
 from sketchrodgs.baseline import knn_path
+from sketchrodgs.consistency import polyline_agreement
 from sketchrodgs.extract import Extraction, extract_rod, load_rod
 from sketchrodgs.render import render
 from sketchrodgs.synthetic import floor_camera, floor_stroke
@@ -380,6 +381,8 @@ def straight_scene():
         ([[-50.0, -50.0], [-10.0, -20.0]], SketchRodGSError, "2 outside the image"),
         ([[10.0, 10.0], [100.0, 10.0]], PathNotFoundError, "background"),
         (np.zeros((3, 3)), SketchRodGSError, "expected shape"),
+        # far out: an error naming the image, not a panic asking for 1e19 samples
+        (np.array([[10.0, 10.0], [100.0, 10.0]]) * 1e20, SketchRodGSError, "0 .2 outside the image"),
     ],
 )
 def test_bad_strokes_are_clear_errors(straight_scene, stroke, error, message):
@@ -416,6 +419,19 @@ def test_bad_parameters_are_clear_errors(straight_scene, kwargs, message):
     stroke = stroke_along(tubes.axes[0])
     with pytest.raises(SketchRodGSError, match=message):
         extract_rod(tubes.scene, CAMERA, stroke, render=images, **kwargs)
+
+
+def test_a_stroke_of_points_a_tenth_of_a_pixel_apart_gives_the_rod_of_a_sparse_one(straight_scene):
+    # a tablet's stroke: the dense stroke was sampled 30 times as densely (with a 200 px band it took
+    # 73 s on the bundled plant); it is thinned to points 1.5 px apart first
+    tubes, images = straight_scene
+    sparse = stroke_along(tubes.axes[0])
+    arc = np.r_[0, np.cumsum(np.linalg.norm(np.diff(sparse, axis=0), axis=1))]
+    at = np.arange(0, arc[-1], 0.1)
+    dense = np.c_[np.interp(at, arc, sparse[:, 0]), np.interp(at, arc, sparse[:, 1])]
+    assert len(dense) > 10 * len(sparse)
+    rods = [extract_rod(tubes.scene, CAMERA, s, radius=0.01, render=images) for s in (sparse, dense)]
+    assert polyline_agreement(rods[0].polyline, rods[1].polyline, 0.01)["max"] < 0.25
 
 
 def test_stroke_ends_a_few_pixels_off_the_object_snap(straight_scene):

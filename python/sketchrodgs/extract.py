@@ -598,8 +598,9 @@ def _colours_reach(
     band = max(band_px or 0.0, 0.01 * width, 2.0)
     if radius is None:
         return band + max(width, height) / 8 + 2
-    pixels = np.floor(stroke).astype(np.int64)
-    pixels = pixels[(pixels >= 0).all(axis=1) & (pixels[:, 0] < width) & (pixels[:, 1] < height)]
+    # (on the image first: a point 1e20 px out has no int64 pixel)
+    on_image = (stroke >= 0).all(axis=1) & (stroke[:, 0] < width) & (stroke[:, 1] < height)
+    pixels = np.floor(stroke[on_image]).astype(np.int64)
     under = depth[pixels[:, 1], pixels[:, 0]]
     under = under[np.isfinite(under) & (under > 0)]
     radius_px = radius * focal / float(np.min(under)) if len(under) else 0.25 * max(width, height)

@@ -176,7 +176,7 @@ pub(crate) fn clean_stroke(
         return Err(PathError::NonFiniteStroke { vertex });
     }
     // resample first, so that a segment reaching in from outside the image keeps its inside part
-    let dense = resample(stroke);
+    let dense = resample(stroke, image.width, image.height);
     let inside: Vec<[f32; 2]> = dense.into_iter().filter(|p| image.pixel_at(p[0], p[1]).is_some()).collect();
     let outside = stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count();
     let too_short = |inside| PathError::StrokeTooShort { inside, outside, width: image.width, height: image.height };
@@ -452,18 +452,53 @@ fn cut_short_front_tail(
     }
 }
 
-/// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed.
-fn resample(stroke: &[[f32; 2]]) -> Vec<[f32; 2]> {
-    let Some(&first) = stroke.first() else { return Vec::new() };
+/// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed, on
+/// the image (`width` x `height` pixels) only: the samples of a segment are those of the whole
+/// segment that lie within `SAMPLE_PX` of the image, so a stroke reaching far outside costs no more
+/// than its part inside (a stroke 1e20 pixels long asked for more samples than memory holds).
+/// A point closer than `SAMPLE_PX / 2` to the last one kept is skipped (the stroke's last point
+/// takes the place of the last one kept): a stroke of one point per tenth of a pixel, as a tablet can give, is sampled as
+/// a stroke of points a few pixels apart is, not 30 times as densely (a 200 px band took 73 s).
+fn resample(stroke: &[[f32; 2]], width: usize, height: usize) -> Vec<[f32; 2]> {
+    let mut vertices: Vec<[f32; 2]> = Vec::with_capacity(stroke.len());
+    for (i, &p) in stroke.iter().enumerate() {
+        let close = vertices.last().is_some_and(|q: &[f32; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 0.5 * SAMPLE_PX);
+        let last = i + 1 == stroke.len();
+        if !close || (last && vertices.len() == 1) {
+            vertices.push(p); // (a stroke of two close points stays two)
+        } else if last && let Some(kept) = vertices.last_mut() {
+            *kept = p;
+        }
+    }
+    let Some(&first) = vertices.first() else { return Vec::new() };
+    let (low, high) = ([-SAMPLE_PX as f64; 2], [width as f64 + SAMPLE_PX as f64, height as f64 + SAMPLE_PX as f64]);
     let mut out = vec![first];
-    for w in stroke.windows(2) {
+    for w in vertices.windows(2) {
         let (a, b) = (w[0], w[1]);
         let length = (b[0] - a[0]).hypot(b[1] - a[1]);
         if length == 0.0 {
             continue;
         }
         let steps = (length / SAMPLE_PX).ceil().max(1.0) as usize;
-        out.extend((1..=steps).map(|s| {
+        // the segment's parameters on the grown image (Liang-Barsky), then the samples there
+        let (mut t0, mut t1) = (0.0_f64, 1.0_f64);
+        for k in 0..2 {
+            let (from, delta) = (f64::from(a[k]), f64::from(b[k]) - f64::from(a[k]));
+            if delta == 0.0 {
+                if from < low[k] || from > high[k] {
+                    (t0, t1) = (1.0, 0.0);
+                }
+                continue;
+            }
+            let (u, v) = ((low[k] - from) / delta, (high[k] - from) / delta);
+            (t0, t1) = (t0.max(u.min(v)), t1.min(u.max(v)));
+        }
+        if t0 > t1 {
+            continue;
+        }
+        let first_step = ((t0 * steps as f64).floor() as usize).max(1);
+        let last_step = ((t1 * steps as f64).ceil() as usize).min(steps);
+        out.extend((first_step..=last_step).map(|s| {
             let t = s as f32 / steps as f32;
             [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
         }));
@@ -696,6 +731,49 @@ mod tests {
         }
         chain.reverse();
         chain
+    }
+
+    /// The samples of `resample` before it was kept to the image: every segment sampled whole.
+    fn resample_whole(stroke: &[[f32; 2]]) -> Vec<[f32; 2]> {
+        let mut out = vec![stroke[0]];
+        for w in stroke.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let length = (b[0] - a[0]).hypot(b[1] - a[1]);
+            if length > 0.0 {
+                let steps = (length / SAMPLE_PX).ceil().max(1.0) as usize;
+                out.extend((1..=steps).map(|s| {
+                    let t = s as f32 / steps as f32;
+                    [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+                }));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn resampling_keeps_to_the_image_and_thins_dense_strokes() {
+        let on_image = |p: &&[f32; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] < 64.0 && p[1] < 48.0;
+        let mut next = numbers_below(11);
+        for _ in 0..300 {
+            // points anywhere within 40 px of the 64x48 image, many of them off it
+            let count = 2 + next(8) as usize;
+            let stroke: Vec<[f32; 2]> =
+                (0..count).map(|_| [next(1600) as f32 * 0.1 - 40.0, next(1300) as f32 * 0.1 - 40.0]).collect();
+            if stroke.windows(2).any(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]) < 0.5 * SAMPLE_PX) {
+                continue; // thinned: not the same vertices
+            }
+            let kept: Vec<[f32; 2]> = resample(&stroke, 64, 48).iter().filter(on_image).copied().collect();
+            let whole: Vec<[f32; 2]> = resample_whole(&stroke).iter().filter(on_image).copied().collect();
+            assert_eq!(kept, whole);
+        }
+        // 0.1 px apart: samples 1.5 px apart, where a stroke of two points has them 3 px apart
+        let dense: Vec<[f32; 2]> = (0..=600).map(|i| [i as f32 * 0.1, 10.0]).collect();
+        let samples = resample(&dense, 64, 48);
+        assert_eq!(samples.first(), Some(&[0.0, 10.0]));
+        assert_eq!(samples.last(), dense.last());
+        assert!((20..=45).contains(&samples.len()), "{} samples", samples.len());
+        // 1e20 px long: the samples on the image and a little around it only
+        assert!(resample(&[[10.0, 10.0], [1e20, 10.0]], 64, 48).len() < 100);
     }
 
     /// A repeatable stream of numbers: each call gives one below its argument.

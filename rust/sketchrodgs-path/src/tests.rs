@@ -226,6 +226,21 @@ fn bad_strokes_and_parameters_are_errors() {
     let params = TraceParams { radius: 0.05, band_px: 81.0, focal_px: FOCAL, ..TraceParams::default() };
     let band = trace_stroke(&scene.image(), &scene.centres, &[[2.5, 20.5], [77.5, 20.5]], &params).unwrap_err();
     assert_eq!(band.to_string(), "band_px 81 is wider than the 80x40 image: give a smaller band");
+    // a stroke running 1e20 pixels out samples its part on the image only (it asked for more samples
+    // than memory holds); one far out altogether is outside the image
+    let far = scene.trace(&[[2.5, 20.5], [77.5, 20.5], [1e20, 20.5]], 0.05).unwrap();
+    assert_eq!(far.pieces[0].pixels, scene.trace(&[[2.5, 20.5], [77.5, 20.5]], 0.05).unwrap().pieces[0].pixels);
+    let away = scene.trace(&[[1e20, 20.5], [2e20, 1e20]], 0.05).unwrap_err();
+    assert!(matches!(away, PathError::StrokeTooShort { inside: 0, outside: 2, .. }), "{away:?}");
+}
+
+#[test]
+fn a_stroke_of_points_a_tenth_of_a_pixel_apart_is_followed_as_a_sparse_one() {
+    // a tablet's stroke: 751 points along the rope; the same path as three points give
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let dense: Vec<[f32; 2]> = (0..=750).map(|i| [2.5 + i as f32 * 0.1, 20.5]).collect();
+    let sparse = scene.trace(&[[2.5, 20.5], [40.0, 20.5], [77.5, 20.5]], 0.05).unwrap();
+    assert_eq!(scene.trace(&dense, 0.05).unwrap().pieces[0].pixels, sparse.pieces[0].pixels);
 }
 
 #[test]
