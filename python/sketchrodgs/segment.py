@@ -142,7 +142,7 @@ def segment_and_bind(
     # Every step below reads the centres within its own reach of the rod: cut the scene to all of
     # their reaches once (each step's own cut is then a pass over thousands, not millions).
     rows = near_box(polyline, scene.means, _reach(radius, grow, attach_size, continuation_size))
-    # np.take: NumPy gathers the rows of an (N, 3) array 4 times faster so than by `means[rows]`
+    # np.take: NumPy gathers the rows of an (N, 3) array 4 times faster than `means[rows]` does
     # (0.08 against 0.35 ms for 26,000 rows; docs/extraction.md, "Speed")
     means, colours = _f32(np.take(scene.means, rows, axis=0)), scene.colors_of(rows)
     binding, surface = _part_and_attached(
