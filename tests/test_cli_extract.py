@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from sketchrodgs import Camera, data, load_scene
@@ -97,9 +99,18 @@ def test_a_failed_extract_still_writes_the_overlay(tmp_path):
     assert green[:20, :130].sum() > 50  # the stroke is drawn where the user put it
 
 
-def test_extract_rejects_a_malformed_stroke_file(tmp_path):
+@pytest.mark.parametrize(
+    "points, message",
+    [
+        ([1, 2, 3], "stroke.json: expected .* got points of shape"),
+        ([["a", "b"], [1, 2]], "stroke.json: .* of numbers .could not convert string to float"),
+        ([[[1, 2]], [3, 4]], "stroke.json: .* of numbers .setting an array element"),
+        ([[1e300, 1], [2, 3]], r"point 0 \(1e\+300, 1\) is beyond float32's range"),
+    ],
+)
+def test_extract_rejects_a_malformed_stroke_file(tmp_path, points, message):
     CAMERA.save(tmp_path / "cam.json")
-    (tmp_path / "stroke.json").write_text(json.dumps({"points": [1, 2, 3]}))
+    (tmp_path / "stroke.json").write_text(json.dumps({"points": points}))
     result = run_cli(
         "extract",
         "sample:ring",
@@ -110,7 +121,17 @@ def test_extract_rejects_a_malformed_stroke_file(tmp_path):
         "-o",
         str(tmp_path / "rod.json"),
     )
-    assert result.returncode == 1 and "stroke.json" in result.stderr
+    assert result.returncode == 1 and re.search(message, result.stderr), result.stderr
+    assert "Traceback" not in result.stderr and "Warning" not in result.stderr
+    assert not (tmp_path / "rod.json").exists()
+
+
+def test_a_radius_not_above_zero_is_named_as_such(tmp_path):
+    for radius in ("-1", "0", "nan"):
+        result = run_cli(
+            "extract", "sample:ring", "--stroke", "s.json", "-o", str(tmp_path / "r.json"), "--radius", radius
+        )
+        assert result.returncode == 2 and f"must be a finite number > 0, got {radius}" in result.stderr
 
 
 def test_extract_can_leave_attached_parts_behind(tmp_path):

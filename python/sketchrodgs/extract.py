@@ -789,7 +789,7 @@ def _check_render_size(render: RenderResult, camera: Camera) -> None:
 
 def _check_stroke(stroke: np.ndarray) -> np.ndarray:
     try:
-        points = np.ascontiguousarray(stroke, dtype=np.float32)
+        points = np.asarray(stroke, dtype=np.float64)
     except (TypeError, ValueError):
         raise SketchRodGSError("stroke: expected an (S, 2) array of pixel coordinates") from None
     if points.ndim != 2 or points.shape[1] != 2:
@@ -799,7 +799,14 @@ def _check_stroke(stroke: np.ndarray) -> np.ndarray:
     if not np.isfinite(points).all():
         bad = int(np.argmax(~np.isfinite(points).all(axis=1)))
         raise SketchRodGSError(f"stroke: point {bad} is not finite")
-    return points
+    # the path search reads float32 pixels (a point at 1e300 became infinite there)
+    beyond = (np.abs(points) > np.finfo(np.float32).max).any(axis=1)
+    if beyond.any():
+        bad = int(np.argmax(beyond))
+        raise SketchRodGSError(
+            f"stroke: point {bad} ({points[bad, 0]:g}, {points[bad, 1]:g}) is beyond float32's range"
+        )
+    return np.ascontiguousarray(points, np.float32)
 
 
 def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, band_px: float | None = None) -> float:

@@ -84,12 +84,16 @@ def vertex_or_fraction(value: str) -> int | float:
     return fraction
 
 
-def non_negative(value: str) -> float:
-    """A finite number >= 0."""
+def _number(value: str) -> float:
     try:
-        number = float(value)
+        return float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {value!r}") from None
+
+
+def non_negative(value: str) -> float:
+    """A finite number >= 0."""
+    number = _number(value)
     if not (math.isfinite(number) and number >= 0):
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {value}")
     return number
@@ -97,8 +101,8 @@ def non_negative(value: str) -> float:
 
 def positive(value: str) -> float:
     """A finite number > 0."""
-    number = non_negative(value)
-    if number == 0:
+    number = _number(value)
+    if not (math.isfinite(number) and number > 0):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {value}")
     return number
 

@@ -74,8 +74,8 @@ def load_stroke(path: str) -> np.ndarray:
     points = data.get("points") if isinstance(data, dict) else data
     try:
         array = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError):
-        array = np.empty(0)
+    except (TypeError, ValueError) as err:  # a string, a ragged or nested list
+        raise SketchRodGSError(f'{path}: expected {{"points": [[x, y], ...]}} of numbers ({err})') from None
     if array.ndim != 2 or array.shape[1] != 2:
         raise SketchRodGSError(f'{path}: expected {{"points": [[x, y], ...]}}, got points of shape {array.shape}')
     return array
