@@ -457,8 +457,9 @@ fn cut_short_front_tail(
 /// segment that lie within `SAMPLE_PX` of the image, so a stroke reaching far outside costs no more
 /// than its part inside (a stroke 1e20 pixels long asked for more samples than memory holds).
 /// A point closer than `SAMPLE_PX / 2` to the last one kept is skipped (the stroke's last point
-/// takes the place of the last one kept): a stroke of one point per tenth of a pixel, as a tablet can give, is sampled as
-/// a stroke of points a few pixels apart is, not 30 times as densely (a 200 px band took 73 s).
+/// takes the place of the last one kept): a stroke of one point per tenth of a pixel, as a tablet
+/// can give, is sampled as one of points a few pixels apart is, not 30 times as densely (with a
+/// 200 px band that took 73 s).
 fn resample(stroke: &[[f32; 2]], width: usize, height: usize) -> Vec<[f32; 2]> {
     let mut vertices: Vec<[f32; 2]> = Vec::with_capacity(stroke.len());
     for (i, &p) in stroke.iter().enumerate() {
