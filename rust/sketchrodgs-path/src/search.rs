@@ -215,11 +215,13 @@ struct Node {
 
 /// Dijkstra state over the band's nodes, reused across the pieces of one trace.
 struct Search<'a> {
-    image: &'a IndexImage<'a>,
     band: &'a Band,
     nodes: Vec<Node>,
     /// No step between pixels whose depths differ by more (`crate::depth_gap`).
     gap: f32,
+    /// Per node, its neighbours' nodes in `NEIGHBOURS` order (`NONE` off the band or the image),
+    /// found in parallel once: the Dijkstra read them from the image-sized `node_of_pixel`.
+    neighbours: Vec<[u32; 8]>,
     cost: Vec<f64>,
     previous: Vec<u32>,
     touched: Vec<usize>,
@@ -256,7 +258,23 @@ impl<'a> Search<'a> {
                 arc: band.arc[k],
             })
             .collect();
-        Self { image, band, nodes, gap, cost: vec![f64::INFINITY; n], previous: vec![NONE; n], touched: Vec::new() }
+        let (width, height) = (image.width as i64, image.height as i64);
+        let neighbours = band
+            .pixel
+            .par_iter()
+            .map(|&pixel| {
+                let (col, row) = ((pixel as usize % image.width) as i64, (pixel as usize / image.width) as i64);
+                NEIGHBOURS.map(|(dx, dy)| {
+                    let (x, y) = (col + dx, row + dy);
+                    if x < 0 || y < 0 || x >= width || y >= height {
+                        return NONE;
+                    }
+                    band.node((y * width + x) as usize).map_or(NONE, |b| b as u32)
+                })
+            })
+            .collect();
+        let (cost, previous) = (vec![f64::INFINITY; n], vec![NONE; n]);
+        Self { band, nodes, gap, neighbours, cost, previous, touched: Vec::new() }
     }
 
     /// Shortest paths from node `start`. Returns the goal if reached, else the settled node of
@@ -268,7 +286,6 @@ impl<'a> Search<'a> {
             self.previous[node] = NONE;
         }
         self.touched.clear();
-        let (width, height) = (self.image.width as i64, self.image.height as i64);
         // (cost, node) ordered as the pair: costs are finite and never negative, so their bits
         // order as they do
         let mut heap: BinaryHeap<Reverse<(u64, u32)>> = BinaryHeap::new();
@@ -288,14 +305,11 @@ impl<'a> Search<'a> {
             if node_a.arc > furthest.1 {
                 furthest = (a, node_a.arc);
             }
-            let pixel = self.band.pixel[a] as usize;
-            let (col, row) = ((pixel % self.image.width) as i64, (pixel / self.image.width) as i64);
-            for (dx, dy) in NEIGHBOURS {
-                let (x, y) = (col + dx, row + dy);
-                if x < 0 || y < 0 || x >= width || y >= height {
+            for (&(dx, dy), &b) in NEIGHBOURS.iter().zip(&self.neighbours[a]) {
+                if b == NONE {
                     continue;
                 }
-                let Some(b) = self.band.node((y * width + x) as usize) else { continue };
+                let b = b as usize;
                 // forward along the stroke (a little slack for its wiggles), which keeps the path on
                 // its branch at crossings
                 let node_b = &self.nodes[b];
