@@ -504,10 +504,9 @@ def _trace(
             )
         except PathNotFoundError as err:
             raise _failure(_with_near_plane_hint(str(err), scene, camera, stroke), stroke, []) from None
-        pixel_path = [p.pixels.astype(np.int64) for p in trace.pieces]
-        if flip:
-            pixel_path = [p[::-1] for p in pixel_path[::-1]]
-        pixels = np.concatenate([p.pixels.astype(np.int64) for p in trace.pieces])
+        pieces = [p.pixels.astype(np.int64) for p in trace.pieces]
+        pixel_path = [p[::-1] for p in pieces[::-1]] if flip else pieces
+        pixels = np.concatenate(pieces)
         ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in trace.pieces])
         path = cKDTree(pixels + 0.5)  # the pixels' centres, for how far off each Gaussian lies
         ids = _past_far_owners(scene, camera, pixels, ids, path, radius)

@@ -151,13 +151,9 @@ def segment_and_bind(
     if attach:
         # a surface left out of the part does not continue it past an end either (a rope's tip
         # past the stroke lies on the floor, joined to all of it)
-        along = _along(binding, polyline)
-        taken = np.zeros(len(means), bool)  # the rows bound so far
-        taken[binding.gaussian_ids] = True
-        binding = _with_continuations(
-            binding, along, taken, polyline, means, radius, continuation_size, colours, surface
-        )
-        binding = _with_strays(binding, along, taken, polyline, means, radius, attach_size)
+        bound = _Bound.of(binding, polyline, len(means))
+        binding = _with_continuations(binding, bound, polyline, means, radius, continuation_size, colours, surface)
+        binding = _with_strays(binding, bound, polyline, means, radius, attach_size)
     return replace(binding, gaussian_ids=rows[binding.gaussian_ids])
 
 
@@ -217,16 +213,30 @@ def _nearer_second(colours: np.ndarray, first: np.ndarray, second: np.ndarray) -
     return np.linalg.norm(colours - second, axis=1) < np.linalg.norm(colours - first, axis=1)
 
 
-def _along(binding: Binding, polyline: np.ndarray) -> np.ndarray:
-    """(G,) float64 how far along `polyline` each entry of `binding` is bound."""
-    arc = arc_lengths(polyline)
-    return arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
+@dataclass
+class _Bound:
+    """What the part and its attached parts took, as the continuations and the strays read it."""
+
+    along: np.ndarray
+    """(G,) float64 how far along the rod each of their G entries is bound (entries added after
+    them, the continuations', are attached)."""
+    length: float
+    """The rod's length as `along` reaches it (the last cumulative arc length)."""
+    taken: np.ndarray
+    """Per row of the centres read: bound so far (the continuations add theirs)."""
+
+    @classmethod
+    def of(cls, binding: Binding, polyline: np.ndarray, rows: int) -> _Bound:
+        arc = arc_lengths(polyline)
+        along = arc[binding.segment] + binding.t * (arc[binding.segment + 1] - arc[binding.segment])
+        taken = np.zeros(rows, bool)
+        taken[binding.gaussian_ids] = True
+        return cls(along, float(arc[-1]), taken)
 
 
 def _with_strays(
     binding: Binding,
-    along: np.ndarray,
-    taken: np.ndarray,
+    bound: _Bound,
     polyline: np.ndarray,
     means: np.ndarray,
     radius: float,
@@ -234,14 +244,13 @@ def _with_strays(
 ) -> Binding:
     """`binding` and the strays around it (see the module docstring; no larger than
     `attach_size` either), each bound as an attached Gaussian at the `(segment, t)` of the moving
-    Gaussian nearest it, with its own offset. `along` is `_along` of the first entries (those the
-    part and its attached parts took; the rest are attached), `taken` the rows of `means` bound."""
+    Gaussian nearest it, with its own offset."""
     # Along the rod the part's own reach (`grow` R) takes its halo; strays hang past the rod's ends
     # and around attached parts, so only the Gaussians there are searched around.
-    length = arc_lengths(polyline)[-1]  # as `along` reaches it (a cumulative sum)
+    along, count = bound.along, len(bound.along)
     start, end = np.zeros(len(binding.attached), bool), np.zeros(len(binding.attached), bool)
-    start[: len(along)] = along <= STRAY_END_RADII * radius
-    end[: len(along)] = along >= length - STRAY_END_RADII * radius
+    start[:count] = along <= STRAY_END_RADII * radius
+    end[:count] = along >= bound.length - STRAY_END_RADII * radius
     searched = np.flatnonzero(binding.attached | start | end)  # entries of the binding
     if len(searched) < 5:
         return binding
@@ -263,7 +272,7 @@ def _with_strays(
             points = means[binding.gaussian_ids[group]].astype(np.float64)
             low, high = points.min(axis=0) - region, points.max(axis=0) + region
             inside |= ((centres >= low) & (centres <= high)).all(axis=1)
-    rows = rows[inside & ~taken[rows]]
+    rows = rows[inside & ~bound.taken[rows]]
     if len(rows) == 0:
         return binding
     points = np.take(means, rows, axis=0).astype(np.float64)
@@ -317,8 +326,7 @@ def _link(centres: np.ndarray, radius: float) -> float:
 
 def _with_continuations(
     binding: Binding,
-    along: np.ndarray,
-    taken: np.ndarray,
+    bound: _Bound,
     polyline: np.ndarray,
     means: np.ndarray,
     radius: float,
@@ -330,13 +338,12 @@ def _with_continuations(
     as an attached Gaussian at that end, with its own offset. Where the part lies on a `surface` of
     another colour ((the part's colour, the surface's), None if not), rows whose `colours` are
     nearer the surface's do not continue it (judged for the rows near the ends only: over all the
-    rows around a rope by a pole, 1.5 ms). `along` is `_along` of `binding`; `taken`, the rows of
-    `means` bound, gains the continuations' rows."""
-    length = arc_lengths(polyline)[-1]  # as `along` reaches it (a cumulative sum)
+    rows around a rope by a pole, 1.5 ms). `bound.taken` gains the continuations' rows."""
+    along = bound.along
     # the part's Gaussians within END_MARGIN R of each end: what a continuation touches
     ends = [
         ~binding.attached & (along <= END_MARGIN * radius),
-        ~binding.attached & (along >= length - END_MARGIN * radius),
+        ~binding.attached & (along >= bound.length - END_MARGIN * radius),
     ]
     near_ends = ends[0] | ends[1]
     if near_ends.sum() < 5:
@@ -357,7 +364,7 @@ def _with_continuations(
         outward = polyline[0] - polyline[1] if end == 0 else polyline[-1] - polyline[-2]
         outward = outward / max(float(np.linalg.norm(outward)), 1e-30)
         rows = _core.rows_in_box(means, tuple(vertex - region), tuple(vertex + region))
-        rows = rows[~taken[rows]]
+        rows = rows[~bound.taken[rows]]
         if surface is not None:
             rows = rows[~_nearer_second(colours[rows], *surface)]
         from_vertex = np.linalg.norm(np.take(means, rows, axis=0) - vertex, axis=1)
@@ -377,7 +384,7 @@ def _with_continuations(
         if len(goes) == 0:
             continue
         count = len(goes)
-        taken[rows[goes]] = True
+        bound.taken[rows[goes]] = True
         segment = np.full(count, 0 if end == 0 else len(polyline) - 2, np.int32)
         t = np.full(count, 0.0 if end == 0 else 1.0, np.float32)
         centre = points[goes].astype(np.float64)
