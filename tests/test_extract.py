@@ -362,6 +362,15 @@ def test_rod_files_keep_bindings_small_and_refuse_broken_ones(tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps(data))
     with pytest.raises(SketchRodGSError, match="gaussian_ids_delta"):
         load_rod(tmp_path / "bad.json")
+    # a negative id would bind a row counted from the scene's end, a repeated one a row twice
+    ids = np.sort(ex.gaussian_ids)
+    for broken, message in (
+        (ids - ids[1], rf"binds Gaussian {ids[0] - ids[1]} but rows are >= 0"),
+        (np.r_[ids[:2], ids[1:]], f"binds Gaussian {ids[1]} twice"),
+    ):
+        (tmp_path / "ids.json").write_text(json.dumps({**ex.to_json(), "gaussian_ids": broken.tolist()}))
+        with pytest.raises(SketchRodGSError, match=rf"ids.json: gaussian_ids: {message}"):
+            load_rod(tmp_path / "ids.json")
 
 
 # ---- bad input ------------------------------------------------------------------------------

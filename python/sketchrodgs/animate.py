@@ -29,6 +29,7 @@ from .rig import DEFAULT_END_RAMP, Rig
 from .rod import ContactSettings, Rod, RodParams, World
 from .scene import GaussianScene
 from .scene_identity import check_rod_scene
+from .segment import check_rows
 from .skin import skin_into
 
 logger = logging.getLogger("sketchrodgs")
@@ -184,10 +185,7 @@ class Animation:
         self.rods: list[Rod] = []
         for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
             check_rod_scene(extraction.scene_identity, scene, f"rod {k}", "the scene animated")
-            if len(extraction.gaussian_ids) and extraction.gaussian_ids.max() >= len(scene):
-                raise SketchRodGSError(
-                    f"rod {k}: binds Gaussian {int(extraction.gaussian_ids.max())} but the scene has {len(scene)}"
-                )
+            check_rows(extraction.gaussian_ids, len(scene), f"rod {k}")
             material = RodParams(**{**p.to_dict(), "radius": extraction.radius})
             if weight is not None:
                 material = RodParams(**{**material.to_dict(), "gravity": weight})

@@ -138,6 +138,7 @@ class Extraction:
         if not isinstance(radius, (int, float)) or not np.isfinite(radius) or radius <= 0:
             raise SketchRodGSError(f"{source}: radius: must be a number > 0, got {radius!r}")
         ids = _array(data["gaussian_ids"], np.int64, (None,), f"{source}: gaussian_ids")
+        sg.check_rows(ids, None, f"{source}: gaussian_ids")
         binding = data["binding"] if isinstance(data["binding"], dict) else {}
         g = len(ids)
         segment = _array(binding.get("segment"), np.int32, (g,), f"{source}: binding.segment")

@@ -20,7 +20,7 @@ from .extract import Extraction
 from .polyline import arc_lengths, near_box
 from .rod import Rod
 from .scene import GaussianScene
-from .segment import Binding, past_an_end, point_at
+from .segment import Binding, check_rows, past_an_end, point_at
 from .separation import trim_shell
 from .skin import BoundRod, skin_into
 
@@ -82,10 +82,7 @@ class Rig:
                     f"rod {k} has {rod.num_vertices} vertices but its extraction's polyline {len(extraction.polyline)}"
                 )
             b = extraction.binding
-            if len(b.gaussian_ids) and (b.gaussian_ids.min() < 0 or b.gaussian_ids.max() >= inputs):
-                raise SketchRodGSError(
-                    f"rod {k}: binds Gaussian {int(b.gaussian_ids.max())} but the scene has {inputs}"
-                )
+            check_rows(b.gaussian_ids, inputs, f"rod {k}")
             b = _expand(b, source, scene.means, extraction.polyline)  # pieces an earlier rod split
             if subdivide:
                 # what an earlier rod bound keeps its geometry: that rod's binding refers to it

@@ -41,6 +41,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from . import _core
+from .errors import SketchRodGSError
 from .polyline import arc_lengths, near_box, polyline_length
 from .scene import GaussianScene
 
@@ -111,6 +112,23 @@ class Binding:
     def extend(self, other: Binding) -> Binding:
         """This binding followed by `other`'s entries."""
         return Binding(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in Binding.__dataclass_fields__))
+
+
+def check_rows(ids: np.ndarray, count: int | None, what: str) -> None:
+    """Raise SketchRodGSError, starting with `what`, naming the first of `ids` that is not a row of
+    a scene of `count` Gaussians (None: of any size), or the first row bound twice. A negative id
+    would bind a row counted from the end without a word."""
+    ids = np.asarray(ids)
+    if len(ids) == 0:
+        return
+    outside = (ids < 0) if count is None else (ids < 0) | (ids >= count)
+    if outside.any():
+        rows = "rows are >= 0" if count is None else f"the scene has {count}"
+        raise SketchRodGSError(f"{what}: binds Gaussian {int(ids[np.argmax(outside)])} but {rows}")
+    ordered = np.sort(ids)
+    repeated = ordered[1:] == ordered[:-1]
+    if repeated.any():
+        raise SketchRodGSError(f"{what}: binds Gaussian {int(ordered[1:][np.argmax(repeated)])} twice")
 
 
 def segment_and_bind(

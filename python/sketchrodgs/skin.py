@@ -23,7 +23,7 @@ from .errors import SketchRodGSError
 from .extract import Extraction
 from .rod import Rod
 from .scene import GaussianScene
-from .segment import Binding
+from .segment import Binding, check_rows
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,8 +61,7 @@ class BoundRod:
         """Bind `binding`'s Gaussians (rows of `scene`) to `rod`, which must be at rest, each
         taking `weight` of the motion (default all of it)."""
         ids = binding.gaussian_ids
-        if len(ids) and (ids.min() < 0 or ids.max() >= len(scene)):
-            raise SketchRodGSError(f"binding refers to Gaussian {int(ids.max())} but the scene has {len(scene)}")
+        check_rows(ids, len(scene), "binding")
         if len(binding.segment) and binding.segment.max() >= rod.num_vertices - 1:
             raise SketchRodGSError(
                 f"binding refers to segment {int(binding.segment.max())} but the rod has {rod.num_vertices - 1}"

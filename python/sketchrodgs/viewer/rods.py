@@ -21,6 +21,7 @@ from ..extract import Extraction
 from ..rig import Rig, clamped_end_weights
 from ..rod import ContactSettings, Rod, SimulationError, World
 from ..scene import GaussianScene
+from ..segment import check_rows
 from ..skin import BoundRod, skin_into
 from .material import CLAMPS, Clamp, Material
 
@@ -193,8 +194,7 @@ class RodSet:
         """
         ids = extraction.binding.gaussian_ids
         with self.lock:
-            if len(ids) and (ids.min() < 0 or ids.max() >= len(self.scene)):
-                raise SketchRodGSError(f"rod binds Gaussian {int(ids.max())} but the scene has {len(self.scene)}")
+            check_rows(ids, len(self.scene), "rod")
             if rod_id is not None and any(e.id == rod_id for e in self._entries):
                 raise SketchRodGSError(f"rod {rod_id} exists already")
             for entry in self._entries:
