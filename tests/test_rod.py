@@ -371,6 +371,8 @@ def test_a_rod_is_the_worlds_own_handle_taking_lists_and_naming_bad_input():
         (lambda: rod.set_positions(np.zeros((7, 2))), r"positions: expected shape \(N, 3\), got \(7, 2\)"),
         (lambda: rod.pin(1, "here"), "position: expected an array of numbers"),
         (lambda: Rod([[0, 0, 0], [1, 0]]), "polyline: expected"),
+        # each finite and positive, but the cross-section's area overflows (a radius in the wrong units)
+        (lambda: Rod(straight(5), radius=1e300), r"`radius` = 1e300 is invalid: makes the cross-section's stiffness"),
     ):
         with pytest.raises(SimulationError, match=message):
             call()

@@ -33,7 +33,7 @@ pub enum RodError {
     #[error("vertex {vertex} folds the polyline back on itself (turning angle ~180 degrees)")]
     FoldedVertex { vertex: usize },
     /// A material or solver parameter is out of range.
-    #[error("parameter `{name}` = {value} is invalid: {reason}")]
+    #[error("parameter `{name}` = {value:?} is invalid: {reason}")]
     InvalidParameter { name: &'static str, value: f64, reason: &'static str },
     /// A vertex index past the end of the rod.
     #[error("vertex {vertex} is out of range for a rod of {len} vertices")]

@@ -42,7 +42,8 @@ impl Default for RodParams {
 
 impl RodParams {
     /// Checks every field: positive radius, moduli and density, `-1 < nu <= 0.5`, damping
-    /// `>= 0`, finite gravity.
+    /// `>= 0`, finite gravity; and that the cross-section's area, moments, stiffnesses and mass
+    /// per length are normal finite numbers.
     pub fn validate(&self) -> Result<(), RodError> {
         let positive = |name, value: f64| {
             if value.is_finite() && value > 0.0 {
@@ -74,6 +75,25 @@ impl RodParams {
         }
         if let Some(&g) = self.gravity.iter().find(|g| !g.is_finite()) {
             return Err(RodError::InvalidParameter { name: "gravity", value: g, reason: "must be finite" });
+        }
+        // What the solver computes from them must be a number too: a radius of 1e300 makes the
+        // cross-section infinite (and every step NaN), one of 1e-200 makes it vanish. The radius is
+        // blamed first, then the modulus or density that multiplies its powers.
+        let usable = |v: f64| v.is_finite() && v >= f64::MIN_POSITIVE;
+        let blamed = if ![self.area(), self.second_moment(), self.polar_moment()].into_iter().all(usable) {
+            Some(("radius", self.radius))
+        } else if !(usable(self.stretch_stiffness()) && usable(self.bend_stiffness())) {
+            Some(("youngs_modulus", self.youngs_modulus))
+        } else if !usable(self.twist_stiffness()) {
+            Some(self.shear_modulus.map_or(("youngs_modulus", self.youngs_modulus), |g| ("shear_modulus", g)))
+        } else if !usable(self.density * self.area()) {
+            Some(("density", self.density))
+        } else {
+            None
+        };
+        if let Some((name, value)) = blamed {
+            let reason = "makes the cross-section's stiffness or mass overflow or vanish (SI units: m, Pa, kg/m^3)";
+            return Err(RodError::InvalidParameter { name, value, reason });
         }
         Ok(())
     }
