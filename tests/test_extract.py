@@ -103,6 +103,39 @@ def test_occlusion_splits_the_path_where_expected():
     assert (tubes.labels[ex.gaussian_ids] == 0).all()
 
 
+def test_piece_ends_that_climbed_onto_the_occluder_at_a_break_are_taken_off():
+    """Two pieces of a path along a part receding 0.01 per pixel, broken by a 6 px gap: the last
+    7 pixels of the first climbed 4 R in front (onto what hides the part there), the first 2 of the
+    second are 3 R in front; both runs go, and nothing else (docs/extraction.md, "Piece ends on an
+    occluder"). R is 5 px, so the sides' depths are taken 15-40 px from the break."""
+    from sketchrodgs.extract import _off_occluders_at_breaks
+
+    radius, focal = 0.05, 100.0  # 5 px at depth 1
+    cols = [np.arange(0, 60), np.arange(66, 126)]
+    pieces = [np.stack([c, np.full_like(c, 10)], axis=1) for c in cols]
+    ids = [c + 1000 for c in cols]
+    depth = [1.0 + 0.01 * (c - 63) for c in cols]
+    depth[0][-7:] -= 4 * radius
+    depth[1][:2] -= 3 * radius
+    kept, kept_ids = _off_occluders_at_breaks(pieces, ids, [d.copy() for d in depth], radius, focal)
+    np.testing.assert_array_equal(kept[0][:, 0], np.arange(0, 53))
+    np.testing.assert_array_equal(kept[1][:, 0], np.arange(68, 126))
+    np.testing.assert_array_equal(kept_ids[1], np.arange(68, 126) + 1000)
+    # 1.5 R in front is within the allowance (2 R): the scatter of a capture's centres, kept
+    depth = [1.0 + 0.01 * (c - 63) for c in cols]
+    depth[0][-7:] -= 1.5 * radius
+    kept, _ = _off_occluders_at_breaks(pieces, ids, depth, radius, focal)
+    assert [len(p) for p in kept] == [60, 60]
+    # a run in front further from the break than the window's near edge (3 R) is not an end: kept
+    depth = [1.0 + 0.01 * (c - 63) for c in cols]
+    depth[0][-30:-20] -= 4 * radius
+    kept, _ = _off_occluders_at_breaks(pieces, ids, depth, radius, focal)
+    assert [len(p) for p in kept] == [60, 60]
+    # one piece: no break, nothing to take
+    kept, _ = _off_occluders_at_breaks(pieces[:1], ids[:1], depth[:1], radius, focal)
+    assert len(kept[0]) == 60
+
+
 def test_binding_is_nearest_point_on_rest_polyline(case):
     _, tubes, _, _, ex = case
     b = ex.binding

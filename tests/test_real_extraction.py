@@ -35,11 +35,7 @@ JITTER = 10
 MISSES = {
     "unjittered": set(),
     "cross_given": {"cases/tree_branch_tall", "heldout/plant_petiole_right"},
-    "cross_estimated": {
-        "cases/plant_side_stem_long",
-        "cases/tree_branch_tall",
-        "heldout/plant_petiole_right",
-    },
+    "cross_estimated": {"cases/tree_branch_tall", "heldout/plant_petiole_right"},
     "jitter": {
         "cases/donut_sprinkle_b",
         "cases/plant_side_stem_long",
@@ -214,6 +210,24 @@ def test_a_sprinkle_stroked_over_the_icing_beside_it_keeps_its_rod_on_the_sprink
     rod = extract_rod(scene, camera, jittered, radius=case["radius"])
     agreement = polyline_agreement(drawn.polyline, rod.polyline, case["radius"])
     assert agreement["max"] <= TARGETS["jitter_max"], agreement
+
+
+def test_a_stem_whose_path_breaks_at_a_petiole_in_front_keeps_its_length():
+    """The held-out back stem in az270 with R estimated (0.985 R): a petiole crosses in front of
+    it, the path breaks there, and its first piece climbed onto the petiole before it was lost (its
+    last pixels 4-5 R in front of the stem on both sides of the gap). The axis dipped 3 R towards
+    the petiole, and the corner cut took the 11 R from the dip to the rod's end: the rod was 22 R
+    long against 31 R with R given. The climbed pixels are taken off (docs/extraction.md, "Piece
+    ends on an occluder"), and the rod spans the stem either way."""
+    from sketchrodgs.realcases import end_gap
+
+    scene, case, camera, stroke = _case_view("heldout", "plant_stem_back", "az270")
+    given = extract_rod(scene, camera, stroke, radius=case["radius"])
+    estimated = extract_rod(scene, camera, stroke)
+    assert len(estimated.pixel_path) == 2  # the break
+    lengths = [np.linalg.norm(np.diff(rod.polyline, axis=0), axis=1).sum() for rod in (given, estimated)]
+    assert lengths[1] >= 0.9 * lengths[0], np.array(lengths) / case["radius"]
+    assert end_gap(estimated) <= TARGETS["end_gap"], end_gap(estimated)
 
 
 def test_a_sprinkle_on_the_icing_estimates_its_radius_across_its_colour():

@@ -457,6 +457,14 @@ def _extract(
     )
 
 
+# A path piece lost where an occluder hides the part may have climbed onto it first: its pixels
+# nearer the break than `_BREAK_WINDOW_R[0]` R that lie `_BREAK_AHEAD_R` R in front of the part's
+# depth across the gap (from the sides' median depths `_BREAK_WINDOW_R` R from it) are taken off
+# (`_off_occluders_at_breaks`).
+_BREAK_AHEAD_R = 2.0
+_BREAK_WINDOW_R = (3.0, 8.0)
+
+
 def _trace(
     scene: GaussianScene,
     camera: Camera,
@@ -506,9 +514,13 @@ def _trace(
         except PathNotFoundError as err:
             raise _failure(_with_near_plane_hint(str(err), scene, camera, stroke), stroke, []) from None
         pieces = [p.pixels.astype(np.int64) for p in trace.pieces]
+        piece_ids = [p.pixel_ids.astype(np.int64) for p in trace.pieces]
+        if len(pieces) > 1:
+            depths = [camera.project(np.take(scene.means, i, axis=0))[1] for i in piece_ids]
+            pieces, piece_ids = _off_occluders_at_breaks(pieces, piece_ids, depths, float(radius), focal)
         pixel_path = [p[::-1] for p in pieces[::-1]] if flip else pieces
         pixels = np.concatenate(pieces)
-        ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in trace.pieces])
+        ids = np.concatenate(piece_ids)
         path = cKDTree(pixels + 0.5)  # the pixels' centres, for how far off each Gaussian lies
         ids = _past_far_owners(scene, camera, pixels, ids, path, radius)
         path_ids = _near_the_path(path, ids, scene.means, camera, radius)
@@ -538,6 +550,44 @@ def _trace(
                 pass
     timings["path_search"] = time.perf_counter() - clock
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
+
+
+def _off_occluders_at_breaks(
+    pieces: list[np.ndarray], ids: list[np.ndarray], depth: list[np.ndarray], radius: float, focal: float
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The path's `pieces` (pixels) and their Gaussians `ids`, with each end at a break taken off
+    where it climbed onto the occluder that hides the part there (docs/extraction.md, "Piece ends on
+    an occluder"): the run of its last pixels before the window whose Gaussians (camera `depth` per
+    pixel) lie over `_BREAK_AHEAD_R` R in front of the part's depth across the gap, the line through
+    the median depths of both sides over the window, `_BREAK_WINDOW_R` R from the break (R in pixels
+    at focal length `focal`)."""
+    pieces, ids, depth = list(pieces), list(ids), list(depth)
+    for k in range(len(pieces) - 1):
+        before, after = depth[k][::-1], depth[k + 1]  # each from the break outwards
+        px = radius * focal / float(np.median(np.r_[before, after]))
+        near, far = (round(r * px) for r in _BREAK_WINDOW_R)
+        if min(len(before), len(after)) < far or far <= near:
+            continue
+        middle = 0.5 * (near + far)
+        gap = float(np.linalg.norm(pieces[k + 1][0] - pieces[k][-1]))
+        z_before, z_after = float(np.median(before[near:far])), float(np.median(after[near:far]))
+        # the part's depth along the line through the two medians, at x px from the break's near
+        # side, is z_before + (x + middle) slope; a pixel over the allowance in front of it climbed
+        slope = (z_after - z_before) / (gap + 2 * middle)
+        limit = z_before + middle * slope - _BREAK_AHEAD_R * radius
+        steps = np.arange(near)
+        cut = _leading_run(before[: len(steps)] < limit - steps * slope)
+        if cut:
+            pieces[k], ids[k], depth[k] = pieces[k][:-cut], ids[k][:-cut], depth[k][:-cut]
+        cut = _leading_run(after[: len(steps)] < limit + (gap + steps) * slope)
+        if cut:
+            pieces[k + 1], ids[k + 1], depth[k + 1] = pieces[k + 1][cut:], ids[k + 1][cut:], depth[k + 1][cut:]
+    return pieces, ids
+
+
+def _leading_run(mask: np.ndarray) -> int:
+    """How many of `mask`'s first entries are True."""
+    return len(mask) if mask.all() else int(np.argmin(mask))
 
 
 def _radius_by_colour(
