@@ -130,6 +130,23 @@ def test_bad_rod_files_and_arguments_fail_readably(ring_rod, tmp_path):
         ).returncode
         == 2
     )
+    # a hold of 1e308 s was an OverflowError, a rate of 1e9 fps a billion frames written for days
+    for option, value, frames in (("--hold", "1e308", "inf frames"), ("--fps", "1e9", "1e+09 frames")):
+        result = run_cli(
+            "animate",
+            "sample:ring",
+            str(path),
+            "--grab",
+            "3",
+            "--to",
+            "0,0.1,0",
+            option,
+            value,
+            "-o",
+            str(tmp_path / "w"),
+        )
+        assert result.returncode == 1 and frames in result.stderr and "at most 100,000" in result.stderr, result.stderr
+        assert "Traceback" not in result.stderr and not (tmp_path / "w").exists()
 
 
 # ----- pulls in screen space, along the rod, with negative values ---------------------------------

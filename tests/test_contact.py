@@ -73,6 +73,25 @@ def test_a_rod_pulled_into_a_slab_of_gaussians_stays_on_it():
             assert rod.positions[20][2] < -10 * R  # through the slab
 
 
+def test_a_grab_target_too_far_to_square_does_not_hang_the_contact_search():
+    """A target 1e300 below the slab (a pull in the wrong units): the way to it was marched along
+    a direction of zero length (its square overflowed), for ever. It now meets the slab at once,
+    and the rod stays finite and on top."""
+    scene = slab()
+    rod_line = np.stack([np.linspace(-0.2, 0.2, 41), np.zeros(41), np.full(41, 4 * R)], axis=1)
+    field = scene_field(scene, [rod_line], [R])
+    assert field is not None
+    world = World()
+    world.set_scene_field(field.values, field.origin, field.spacing)
+    rod = Rod(rod_line, radius=R, world=world)
+    rod.clamp(0)
+    rod.clamp(-1)
+    rod.grab(20, rod_line[20] - (0.0, 0.0, 1e300))
+    world.step(1 / 60, 3)
+    assert np.isfinite(rod.positions).all()
+    assert float(field.distance(rod.positions).min()) >= R - 0.05 * R - field.spacing
+
+
 def test_a_rod_pulled_through_a_slab_stays_on_its_top_with_cells_of_a_radius():
     """Issue 20's measure: a 1 m rod of R = 1 cm, 4 R above a slab of Gaussians (sigma R / 2, R / 2
     apart; they reach alpha 0.5 between 0.06 R under and 0.07 R over z = 0), its middle pulled 20 R

@@ -13,6 +13,7 @@ while their rest shapes hold the captured shapes (a captured hanging cable stays
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -36,6 +37,8 @@ logger = logging.getLogger("sketchrodgs")
 
 Clamp = Literal["both", "start", "end", "none"]
 CLAMPS: tuple[str, ...] = get_args(Clamp)
+# A gesture longer than this many frames is refused (`Pull.frame_count`): over 55 min at 30 fps.
+MAX_FRAMES = 100_000
 _CLAMPED_ENDS = {"both": (0, -1), "start": (0,), "end": (-1,), "none": ()}
 
 
@@ -101,6 +104,19 @@ class Pull:
     def total(self) -> float:
         """Seconds of simulated time the gesture covers."""
         return self.duration + self.hold + (self.settle if self.release else 0.0)
+
+    def frame_count(self, fps: float) -> int:
+        """How many frames the gesture makes at `fps`; at most `MAX_FRAMES` (a duration or rate in
+        the wrong units would simulate, and the command line write, frames for days)."""
+        if not (np.isfinite(fps) and fps > 0):
+            raise SketchRodGSError(f"fps: must be > 0, got {fps}")
+        frames = self.total * fps
+        if not frames <= MAX_FRAMES:
+            raise SketchRodGSError(
+                f"the pull lasts {self.total:.3g} s (duration, hold and settle), {frames:.3g} frames at {fps:g} fps;"
+                f" at most {MAX_FRAMES:,}"
+            )
+        return int(round(frames))
 
     def phase(self, t: float) -> str:
         if t < self.duration:
@@ -225,8 +241,7 @@ class Animation:
 
     def frames(self, pull: Pull, fps: float) -> Iterator[Frame]:
         """Simulate `pull` at `fps` frames per second, skinning after every frame."""
-        if not (np.isfinite(fps) and fps > 0):
-            raise SketchRodGSError(f"fps: must be > 0, got {fps}")
+        count = pull.frame_count(fps)
         if not 0 <= pull.rod < len(self.rods):
             raise SketchRodGSError(f"pull rod: {pull.rod} is not one of the {len(self.rods)} rods")
         rod = self.rods[pull.rod]
@@ -240,16 +255,16 @@ class Animation:
         start = np.array(rod.positions[pull.vertex], np.float64)
         offset = np.array(pull.offset)
         length = polyline_length(rod.rest_positions)
-        if np.linalg.norm(offset) > length:
+        reach = math.hypot(*pull.offset)  # (no overflow where the offset's square would)
+        if reach > length:
             # the rod cannot follow that far; its Gaussians would be drawn out into a streak
             logger.warning(
                 "rod %d: the pull (%.3g) is longer than the rod (%.3g); its Gaussians will be stretched far",
                 pull.rod,
-                np.linalg.norm(offset),
+                reach,
                 length,
             )
         dt = 1.0 / fps
-        count = int(round(pull.total * fps))
         rod.grab(pull.vertex, start)
         released = False
         for index in range(1, count + 1):

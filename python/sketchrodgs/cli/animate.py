@@ -174,6 +174,8 @@ def run(args: argparse.Namespace) -> int:
 
     with Outputs() as outputs:
         out = outputs.folder(args.output, "-o")
+        # the gesture's length at this rate, before anything is read (the pull itself comes later)
+        Pull(0, (0.0, 0.0, 0.0), args.duration, args.hold, args.release, args.settle).frame_count(args.fps)
         extractions = [load_rod(path)[0] for path in args.rods]
         camera = select_camera(load_cameras(args.camera), args.view, args.camera) if args.camera else None
         scene = load_scene(args.scene)
@@ -230,7 +232,7 @@ def run(args: argparse.Namespace) -> int:
             }
             atomic_write_text(out / "ply" / "source.json", json.dumps(source) + "\n")
         totals: dict[str, float] = {}
-        count = int(round(pull.total * args.fps))
+        count = pull.frame_count(args.fps)
         # only the rods' Gaussians move: the rest is projected and binned once (docs/rendering.md)
         renderer = FrameRenderer(animation.rest_scene, camera, animation.moving_rows, outputs=COLOR_OUTPUTS)
         with contextlib.ExitStack() as stack:

@@ -169,11 +169,14 @@ impl DistanceField {
     /// radius of the surface, and the surface's normal there; None when the way is clear. Marched
     /// by the clearance, at least a quarter of a grid spacing a step, then refined by bisection.
     pub fn first_contact(&self, from: DVec3, to: DVec3, radius: f64) -> Option<(DVec3, DVec3)> {
-        let length = (to - from).length();
-        if length <= 0.0 {
+        // the length taken on the step scaled to its largest coordinate: a step of 1e300 (a grab
+        // target that far) squares to infinity, and the march along a zero direction never ended
+        let scale = (to - from).abs().max_element();
+        if !(scale.is_finite() && scale > 0.0) {
             return None;
         }
-        let dir = (to - from) / length;
+        let unit = (to - from) / scale;
+        let (length, dir) = (scale * unit.length(), unit / unit.length());
         let clearance = |s: f64| self.sample(from + s * dir).map_or(f64::INFINITY, |(d, _)| d - radius);
         let (mut free, mut s) = (0.0, 0.0);
         let hit = loop {
@@ -502,6 +505,19 @@ mod tests {
         });
         let back = (0..20).map(|i| DVec3::new(0.19 - 0.01 * i as f64, 3.0 * r, 0.0));
         out.chain(turn).chain(back).collect()
+    }
+
+    #[test]
+    fn a_move_too_long_to_square_still_meets_the_surface() {
+        // a floor at z = 0.35 in a field of 8^3 nodes 0.1 apart; moving down from above it by 1e300
+        // (whose square overflows) meets it, moving up by as much is clear
+        let values = (0..512).map(|i| (0.1 * (i / 64) as f64 - 0.35) as f32).collect();
+        let field = DistanceField::new([0.0; 3], 0.1, [8, 8, 8], values).unwrap();
+        let from = DVec3::new(0.35, 0.35, 0.6);
+        let (point, normal) = field.first_contact(from, DVec3::new(0.35, 0.35, -1e300), 0.05).unwrap();
+        assert!((point.z - 0.4).abs() < 0.01 && normal.z > 0.99, "{point} {normal}");
+        assert!(field.first_contact(from, DVec3::new(0.35, 0.35, 1e300), 0.05).is_none());
+        assert!(field.first_contact(from, DVec3::new(0.35, 0.35, f64::INFINITY), 0.05).is_none());
     }
 
     #[test]
