@@ -315,7 +315,10 @@ fn extreme_input_never_panics_or_returns_nan() {
     let r = rod.step(DT, &settings).unwrap();
     assert!(!r.converged && r.rejected > 0, "{r:?}");
     assert!(rod.positions().iter().all(|p| p.is_finite()));
-    // Non-finite targets and steps are refused up front.
+    // Non-finite targets and steps are refused up front, and positions whose edges overflow.
+    let far: Vec<[f64; 3]> = rod.positions().iter().map(|p| (*p * 1e300).to_array()).collect();
+    assert!(matches!(rod.set_positions(&far), Err(RodError::EdgeTooLong { edge: 0 })));
+    assert!(rod.positions().iter().all(|p| p.is_finite()));
     assert!(rod.grab(2, [f64::NAN, 0.0, 0.0]).is_err());
     assert!(rod.step(f64::INFINITY, &settings).is_err());
     assert!(rod.step(-1.0, &settings).is_err());

@@ -188,6 +188,10 @@ impl ElasticRod {
         }
         for j in 0..n - 1 {
             let l = (x[j + 1] - x[j]).length();
+            // (an edge whose square overflows made the next step NaN)
+            if l == f64::INFINITY {
+                return Err(RodError::EdgeTooLong { edge: j });
+            }
             let min_length = MIN_DEFORMED_EDGE * self.rest_len[j];
             if l.is_nan() || l <= min_length {
                 return Err(RodError::DegenerateEdge { edge: j, length: l, min_length });
