@@ -33,6 +33,7 @@ from .working_view import WORKING_WIDTH, WorkingView
 DEFAULT_SMOOTHING = 1.0  # radii (polyline.smooth_axis)
 MAX_SMOOTHING = 100.0  # far past any use: the axis is a straight line long before
 _SMALLEST = float(np.finfo(np.float32).tiny)  # lengths go to Rust as float32
+_LARGEST = float(np.finfo(np.float32).max)
 # A path Gaussian's centre must project within this many pixels, or radii, of the path; within
 # the wider reach where the nearer keeps fewer than half of what that would (`_near_the_path`).
 _NEAR_PIXEL_PX = 3.0
@@ -305,10 +306,10 @@ def extract_rod(
     for name, value in (("alpha", alpha), ("segment_scale", segment_scale)):
         if not np.isfinite(value) or value < 0:
             raise SketchRodGSError(f"{name}: must be finite and >= 0, got {value}")
-    if radius is not None and not (np.isfinite(radius) and radius >= _SMALLEST):
-        raise SketchRodGSError(f"radius: must be finite and at least {_SMALLEST:g}, got {radius}")
-    if band_px is not None and not (np.isfinite(band_px) and band_px > 0):
-        raise SketchRodGSError(f"band_px: must be finite and > 0, got {band_px}")
+    if radius is not None and not (np.isfinite(radius) and _SMALLEST <= radius <= _LARGEST):
+        raise SketchRodGSError(f"radius: must be finite and within float32's {_SMALLEST:g}..{_LARGEST:g}, got {radius}")
+    if band_px is not None and not (np.isfinite(band_px) and 0 < band_px <= _LARGEST):
+        raise SketchRodGSError(f"band_px: must be finite, > 0 and within float32's range, got {band_px}")
     if attach_size is not None and not (np.isfinite(attach_size) and attach_size > 0):
         raise SketchRodGSError(f"attach_size: must be finite and > 0, got {attach_size}")
     if edge_length is not None and not (np.isfinite(edge_length) and edge_length > 0):
