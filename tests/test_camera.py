@@ -29,6 +29,16 @@ def test_look_at_reproduces_the_oracle_cameras():
         assert cam.fx == pytest.approx(800) and (cam.cx, cam.cy) == (480, 270)
 
 
+def test_look_at_refuses_points_too_far_apart_or_not_finite():
+    """A camera 1e300 away (a distance in the wrong units): the direction's square overflowed and
+    the camera came out "not a rigid transform", naming nothing the user gave."""
+    with pytest.raises(CameraError, match=r"too far apart for the camera's maths"):
+        Camera.look_at((0.0, 0.0, -1e300), (0.0, 0.0, 0.0))
+    with pytest.raises(CameraError, match="must be finite"):
+        Camera.look_at((0.0, 0.0, np.nan), (0.0, 0.0, 0.0))
+    assert np.isfinite(Camera.look_at((0.0, 0.0, -1e150), (0.0, 0.0, 0.0)).world_to_camera).all()
+
+
 def test_look_at_orientation():
     cam = Camera.look_at(eye=(0, 0, -5), target=(0, 0, 0), up=(0, 1, 0), width=100, height=100, fov_y_deg=60)
     uv, depth = cam.project(np.array([[0.0, 0, 0], [0, 1, 0], [1, 0, 0]]))

@@ -189,7 +189,15 @@ class Camera:
         is the image centre and pixels are square.
         """
         eye_v, target_v, up_v = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+        if not (np.isfinite(eye_v).all() and np.isfinite(target_v).all() and np.isfinite(up_v).all()):
+            raise CameraError(f"look_at: eye, target and up must be finite, got {eye_v}, {target_v}, {up_v}")
         forward = target_v - eye_v
+        largest = float(np.abs(forward).max())
+        if not math.isfinite(largest * largest * 3):
+            # (a distance of 1e300: its square overflows, and the camera came out "not a rigid transform")
+            raise CameraError(
+                f"look_at: eye {eye_v.tolist()} and target {target_v.tolist()} are too far apart for the camera's maths"
+            )
         if np.linalg.norm(forward) == 0:
             raise CameraError("look_at: eye and target coincide")
         z = forward / np.linalg.norm(forward)
