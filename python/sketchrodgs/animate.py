@@ -30,7 +30,6 @@ from .rig import DEFAULT_END_RAMP, Rig
 from .rod import ContactSettings, Rod, RodParams, World
 from .scene import GaussianScene
 from .scene_identity import check_rod_scene
-from .segment import check_rows
 from .skin import skin_into
 
 logger = logging.getLogger("sketchrodgs")
@@ -201,7 +200,6 @@ class Animation:
         self.rods: list[Rod] = []
         for k, (extraction, p) in enumerate(zip(extractions, per_rod)):
             check_rod_scene(extraction.scene_identity, scene, f"rod {k}", "the scene animated")
-            check_rows(extraction.gaussian_ids, len(scene), f"rod {k}")
             material = RodParams(**{**p.to_dict(), "radius": extraction.radius})
             if weight is not None:
                 material = RodParams(**{**material.to_dict(), "gravity": weight})

@@ -198,9 +198,10 @@ class Camera:
             raise CameraError(
                 f"look_at: eye {eye_v.tolist()} and target {target_v.tolist()} are too far apart for the camera's maths"
             )
-        if np.linalg.norm(forward) == 0:
+        distance = np.linalg.norm(forward)
+        if distance == 0:
             raise CameraError("look_at: eye and target coincide")
-        z = forward / np.linalg.norm(forward)
+        z = forward / distance
         down = -up_v - np.dot(-up_v, z) * z
         if np.linalg.norm(down) < 1e-9:
             raise CameraError("look_at: up is parallel to the viewing direction")
