@@ -67,7 +67,8 @@ const OCCLUDER_SHORT_R: f32 = 4.0;
 /// depth gaps in front of it (behind it), the depth-over-stroke slopes on the two sides, taken over
 /// the run's length (`TURN_WINDOW_R` radii at least), differ by `TURN_DEG` or more, and the run is
 /// not the part (not more slender than the other side by `TURN_WIDER` radii on average, nor as
-/// slender and longer).
+/// slender and longer, each side's length taken beyond the apex's plateau: the members within
+/// `TURN_FLAT_GAPS` depth gaps of it).
 /// Depths are a running median over `2 TURN_MEDIAN + 1` members.
 const TURN_SHARE: f32 = 0.6;
 const TURN_DEG: f32 = 60.0;
@@ -76,6 +77,7 @@ const TURN_FRONT_GAPS: f32 = 2.0;
 const TURN_MEDIAN: usize = 2;
 const TURN_SIGNS: [f32; 2] = [1.0, -1.0];
 const TURN_WIDER: f32 = 0.2;
+const TURN_FLAT_GAPS: f32 = 0.5;
 
 /// The stroke after clean-up.
 #[derive(Debug, Clone)]
@@ -353,7 +355,18 @@ fn cut_turn_tail_signed(
     // Which side of the apex is the part: the more slender, else the longer.
     let mean_wide = |side: &[(usize, Candidate)]| side.iter().map(|m| m.1.wide).sum::<f32>() / side.len() as f32;
     let (run_wide, inner_wide) = (mean_wide(&chain[apex + 1..]), mean_wide(&chain[..apex]));
-    let (run_span, inner_span) = ((end_arc - at[apex]).abs(), (at[apex] - at[0]).abs());
+    // The sides' lengths leave out the apex's plateau, the members within `TURN_FLAT_GAPS` of its
+    // depth around it: which of them is the apex is a tie that a pixel's shift of the stroke breaks
+    // either way, and it moved a flat valley's length from one side to the other.
+    let flat = TURN_FLAT_GAPS * depth_gap;
+    let (mut low, mut high) = (apex, apex);
+    while low > 0 && depth[low - 1] >= depth[apex] - flat {
+        low -= 1;
+    }
+    while high + 1 < n && depth[high + 1] >= depth[apex] - flat {
+        high += 1;
+    }
+    let (run_span, inner_span) = ((end_arc - at[high]).abs(), (at[low] - at[0]).abs());
     if run_wide < inner_wide - TURN_WIDER || (run_wide <= inner_wide + TURN_WIDER && run_span > inner_span) {
         return;
     }
@@ -940,6 +953,21 @@ mod tests {
             // the turn again, but the run after it is slender and the longer side wide
             let wide_before = |i: usize| if i < 55 { 3.0 } else { 0.0 };
             assert_eq!(cut(81, &peak, &wide_before, at_end), 0, "the slender side is the part");
+            // a valley with a flat bottom (x 21-39 px): gently up to the start, steeply behind over
+            // the last 30 px. Both sides are as slender, and beyond the bottom (what lies within half
+            // a gap of it) the run is the longer: the part, wherever along the bottom the apex falls.
+            // Measured from the bottom's member nearest the end, the other side was the longer (39
+            // px against 30) and the run was cut.
+            let flat_valley = |x: f32| {
+                if x < 21.0 {
+                    1.0 + 0.0008 * (21.0 - x)
+                } else if x <= 39.0 {
+                    1.0
+                } else {
+                    1.0 + 0.0025 * (x - 39.0)
+                }
+            };
+            assert_eq!(cut(24, &flat_valley, &slender, at_end), 0, "the longer side beyond a flat bottom is the part");
         }
     }
 }

@@ -1,0 +1,133 @@
+"""How steady the real cases' rods are when the stroke moves by a pixel: each view's stroke shifted
+by each of the 8 offsets of up to 1 px in x and y, extracted with R given and with R estimated, and
+compared with the stroke as drawn. A user never draws the same stroke twice to the pixel, and the
+issue's jitter (3-8 px of noise, R given) does not show what a pixel does to the radius estimate, nor
+a rod that comes out shorter (the distances count only where the rods overlap). Both cores, about
+a minute (docs/extraction.md, "A pixel's shift").
+
+    python benches/real_case_shifts.py [--only SUBSTRING] [--all]
+
+Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
+its length, or whose R estimates spread over 1.3 x; `--all` lists every view.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+
+from _table import print_table
+from sketchrodgs import Camera, realcases, render
+from sketchrodgs import consistency as cs
+from sketchrodgs.errors import PathNotFoundError
+from sketchrodgs.extract import extract_rod
+from sketchrodgs.polyline import polyline_length
+
+DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "real_cases"
+SETS = [
+    ("cases.json", "14 cases"),
+    ("heldout_cases.json", "10 held-out parts"),
+    ("sprinkle_cases.json", "18 sprinkles"),
+]
+SHIFTS = [(dx, dy) for dx in (-1.0, 0.0, 1.0) for dy in (-1.0, 0.0, 1.0) if (dx, dy) != (0.0, 0.0)]
+FAR_R = realcases.TARGETS["cross_max"]  # a shifted rod this far from the rod as drawn (in R) is listed
+SHORT = 0.75  # and one shorter than this share of it
+SPREAD = 1.3  # and R estimates spreading over this ratio
+
+
+def shifted(scene, camera, stroke, radius, images, true_radius) -> dict[str, float]:
+    """The rod of `stroke` (R `radius`, None to estimate it) against the rods of its 8 shifts: the
+    largest distance (in `true_radius`), the least length ratio, the estimates' range (x
+    `true_radius`) and how many shifts failed."""
+    drawn = extract_rod(scene, camera, stroke, radius=radius, render=images)
+    length = polyline_length(drawn.polyline)
+    far, short, radii, failed = 0.0, 1.0, [drawn.radius], 0
+    for offset in SHIFTS:
+        try:
+            rod = extract_rod(scene, camera, stroke + offset, radius=radius, render=images)
+        except PathNotFoundError:
+            failed += 1
+            continue
+        far = max(far, cs.polyline_agreement(drawn.polyline, rod.polyline, true_radius)["max"])
+        short = min(short, polyline_length(rod.polyline) / length)
+        radii.append(rod.radius)
+    return {
+        "far": far,
+        "short": short,
+        "low": min(radii) / true_radius,
+        "high": max(radii) / true_radius,
+        "failed": failed,
+    }
+
+
+def score(job: tuple[str, int]) -> list[dict]:
+    """The views of one case of the file `job[0]`, by index."""
+    scenes, cases = realcases.load_cases(DATA / job[0])
+    case = cases[job[1]]
+    scene, radius = scenes[case["scene"]], float(case["radius"])
+    rows = []
+    for view in case["views"]:
+        camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
+        stroke = np.asarray(view["stroke"], np.float64)
+        images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
+        given = shifted(scene, camera, stroke, radius, images, radius)
+        estimated = shifted(scene, camera, stroke, None, images, radius)
+        rows.append({"view": f"{case['name']}/{view['name']}", "given": given, "estimated": estimated})
+    return rows
+
+
+def flagged(row: dict) -> bool:
+    """Whether a view's shifted rods miss any of the bounds."""
+    g, e = row["given"], row["estimated"]
+    return (
+        max(g["far"], e["far"]) > FAR_R
+        or min(g["short"], e["short"]) < SHORT
+        or e["high"] / e["low"] > SPREAD
+        or g["failed"] + e["failed"] > 0
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", default="", help="cases whose name holds this")
+    parser.add_argument("--all", action="store_true", help="list every view, not only those missing a bound")
+    args = parser.parse_args()
+    with Pool(2) as pool:
+        for file, what in SETS:
+            start = time.perf_counter()
+            _, cases = realcases.load_cases(DATA / file)
+            jobs = [(file, k) for k, case in enumerate(cases) if args.only in case["name"]]
+            rows = [row for rows in pool.map(score, jobs, chunksize=1) for row in rows]
+            count = {
+                "far": sum(max(r["given"]["far"], r["estimated"]["far"]) > FAR_R for r in rows),
+                "short": sum(min(r["given"]["short"], r["estimated"]["short"]) < SHORT for r in rows),
+                "spread": sum(r["estimated"]["high"] / r["estimated"]["low"] > SPREAD for r in rows),
+                "failed": sum(r["given"]["failed"] + r["estimated"]["failed"] for r in rows),
+            }
+            print_table(
+                f"{what}, {len(rows)} views shifted by a pixel: {count['far']} with a rod over {FAR_R} R away, "
+                f"{count['short']} under {SHORT:.0%} of the length, {count['spread']} with R over {SPREAD} x apart, "
+                f"{count['failed']} failed ({time.perf_counter() - start:.0f} s)",
+                ["view", "R given: max (R)", "least length", "R estimated: R / R", "max (R)", "least length", "failed"],
+                [
+                    [
+                        r["view"],
+                        f"{r['given']['far']:.2f}",
+                        f"{r['given']['short']:.2f}",
+                        f"{r['estimated']['low']:.2f}-{r['estimated']['high']:.2f}",
+                        f"{r['estimated']['far']:.2f}",
+                        f"{r['estimated']['short']:.2f}",
+                        str(r["given"]["failed"] + r["estimated"]["failed"]),
+                    ]
+                    for r in rows
+                    if args.all or flagged(r)
+                ],
+            )
+
+
+if __name__ == "__main__":
+    main()
