@@ -143,9 +143,10 @@ class CaseScore:
         return float(sum(np.log(v / target) if np.isfinite(v) else np.inf for v, target in pairs if not v <= target))
 
 
-def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10) -> list[ViewResult]:
+def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10, draw: int = 0) -> list[ViewResult]:
     """Extract every view of `case`: R given and estimated, the reversed stroke, `jitter` jittered
-    strokes (seeded by the case and view names, so runs repeat)."""
+    strokes (seeded by the case and view names, so runs repeat; `draw` > 0 draws other jittered
+    strokes, to judge a change on strokes it was not made on)."""
     radius = float(case["radius"])
     results = []
     for view in case["views"]:
@@ -164,7 +165,7 @@ def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10) -> li
         result = ViewResult(
             view["name"], attempt(stroke, radius), attempt(stroke, None), attempt(cs.reversed_stroke(stroke), radius)
         )
-        seed = zlib.crc32(f"{case['name']}/{view['name']}".encode())
+        seed = zlib.crc32(f"{case['name']}/{view['name']}".encode()) + draw
         for s in cs.jittered_strokes(stroke, count=jitter, seed=seed):
             try:
                 result.jittered.append(extract_rod(scene, camera, s, radius=radius, render=images))
