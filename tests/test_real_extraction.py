@@ -244,6 +244,23 @@ def test_a_petiole_stroke_shifted_by_a_pixel_keeps_its_length():
     assert lengths[1] >= 0.8 * lengths[0], np.array(lengths) / case["radius"]
 
 
+def test_a_jittered_stroke_over_a_sprinkle_as_much_on_the_icing_finds_both_colours():
+    """sprinkle_14 in az000 under a jittered stroke (the fifth draw's third, `real_case_misses.py
+    --draws`) that runs 10 px past both ends: about as many of the colours near it are the icing's
+    as the sprinkle's, so their median lay between the two, the 2-means found no two colours, the
+    path had no colour term, and the rod ran over the icing, 4.9 R from the rod as drawn. The
+    2-means now starts again from the two sides of the median (docs/extraction.md, "A part lying on
+    a surface")."""
+    import zlib
+
+    from sketchrodgs.consistency import jittered_strokes, polyline_agreement
+
+    scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_14", "az000")
+    jittered = jittered_strokes(stroke, count=10, seed=zlib.crc32(b"sprinkle_14/az000") + 4)[2]
+    drawn, rod = (extract_rod(scene, camera, s, radius=case["radius"]) for s in (stroke, jittered))
+    assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
+
+
 def test_a_sprinkle_on_the_icing_estimates_its_radius_across_its_colour():
     """Sprinkle b in az270, R estimated: the widths under its stroke ran over the icing at its depth
     and the colour rule did not fire (1.89 x R). Measured from the path across the sprinkle's colour

@@ -440,6 +440,8 @@ const SURFACE_SLOPE: f32 = 2.0;
 const PART_APART: f32 = 0.25;
 const CHROMA_APART: f32 = 0.1;
 const TWO_COLOUR_ROUNDS: usize = 4;
+/// Power-iteration steps for the colours' principal axis (`principal_halves`).
+const PRINCIPAL_ROUNDS: usize = 16;
 /// Extra cost per pixel step onto a pixel nearer the surround's colour than the part's, in units of
 /// a pixel's world size: four times a surface `WIDE_CAP` radii too wide. From a quarter to twice
 /// that the sprinkles' numbers are the same (7 misses); without it, 10.
@@ -489,6 +491,10 @@ fn surface_colours(
 /// Neighbours of the part's colour beside it (other sprinkles) fall in the part's cluster but do not
 /// decide which one it is; a stroke drawn mostly over the surround still has more of the part near
 /// it than 3-5 `R` away. None where the clusters lie within `PART_APART` of each other.
+/// Where the two colours are about as many, the median of all lies between them, every colour is
+/// well off it, and so is their median: the 2-means from there leaves one cluster empty. It starts
+/// again from the two sides of the median along the colours' principal axis (a jittered stroke over
+/// a sprinkle found no colours so, and its rod ran over the icing, 4.9 `R` off).
 fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
     let all: Vec<[f32; 3]> = near.iter().chain(ring).copied().collect();
     if near.is_empty() || ring.is_empty() {
@@ -500,30 +506,68 @@ fn two_colours(near: &[[f32; 3]], ring: &[[f32; 3]]) -> Option<SurfaceColours> {
     if off.is_empty() {
         return None;
     }
-    let mut centres = [first, median_colour(&off)];
-    let nearest = |c: [f32; 3], centres: &[[f32; 3]; 2]| {
-        usize::from(colour_distance(c, centres[1]) < colour_distance(c, centres[0]))
-    };
-    for _ in 0..TWO_COLOUR_ROUNDS {
-        let mut members: [Vec<[f32; 3]>; 2] = [Vec::new(), Vec::new()];
-        for &c in &all {
-            members[nearest(c, &centres)].push(c);
-        }
-        if members.iter().any(Vec::is_empty) {
-            return None;
-        }
-        centres = [median_colour(&members[0]), median_colour(&members[1])];
-    }
+    let centres = two_means(&all, [first, median_colour(&off)])
+        .or_else(|| principal_halves(&all, first).and_then(|start| two_means(&all, start)))?;
     if colour_distance(centres[0], centres[1]) < PART_APART
         || colour_distance(chroma(centres[0]), chroma(centres[1])) < CHROMA_APART
     {
         return None;
     }
     let share = |colours: &[[f32; 3]]| {
-        colours.iter().filter(|&&c| nearest(c, &centres) == 0).count() as f32 / colours.len() as f32
+        colours.iter().filter(|&&c| nearer(c, &centres) == 0).count() as f32 / colours.len() as f32
     };
     let (part, surround) = if share(near) > share(ring) { (0, 1) } else { (1, 0) };
     Some(SurfaceColours { part: centres[part], surround: centres[surround] })
+}
+
+/// Which of the two `centres` colour `c` is nearer (0 on a tie).
+fn nearer(c: [f32; 3], centres: &[[f32; 3]; 2]) -> usize {
+    usize::from(colour_distance(c, centres[1]) < colour_distance(c, centres[0]))
+}
+
+/// The two clusters' centres after `TWO_COLOUR_ROUNDS` rounds of 2-means (with medians) over
+/// `colours` from `centres`; None where a cluster empties.
+fn two_means(colours: &[[f32; 3]], mut centres: [[f32; 3]; 2]) -> Option<[[f32; 3]; 2]> {
+    for _ in 0..TWO_COLOUR_ROUNDS {
+        let mut members: [Vec<[f32; 3]>; 2] = [Vec::new(), Vec::new()];
+        for &c in colours {
+            members[nearer(c, &centres)].push(c);
+        }
+        if members.iter().any(Vec::is_empty) {
+            return None;
+        }
+        centres = [median_colour(&members[0]), median_colour(&members[1])];
+    }
+    Some(centres)
+}
+
+/// The medians of `colours` on either side of `centre` along their principal axis (their greatest
+/// spread about `centre`, by power iteration); None where a side is empty or they do not spread.
+fn principal_halves(colours: &[[f32; 3]], centre: [f32; 3]) -> Option<[[f32; 3]; 2]> {
+    let offset = |c: &[f32; 3]| [c[0] - centre[0], c[1] - centre[1], c[2] - centre[2]];
+    let mut spread = [[0.0_f32; 3]; 3];
+    for d in colours.iter().map(offset) {
+        for (row, &di) in spread.iter_mut().zip(&d) {
+            for (cell, &dj) in row.iter_mut().zip(&d) {
+                *cell += di * dj;
+            }
+        }
+    }
+    // from the channel that spreads most, so that the start is not square to the axis
+    let widest = (0..3).max_by(|&a, &b| spread[a][a].total_cmp(&spread[b][b]))?;
+    let mut axis = [0.0_f32; 3];
+    axis[widest] = 1.0;
+    for _ in 0..PRINCIPAL_ROUNDS {
+        let next = spread.map(|row| row.iter().zip(&axis).map(|(a, b)| a * b).sum::<f32>());
+        let norm = next.iter().map(|v| v * v).sum::<f32>().sqrt();
+        if !(norm.is_finite() && norm > 0.0) {
+            return None;
+        }
+        axis = next.map(|v| v / norm);
+    }
+    let (ahead, behind): (Vec<[f32; 3]>, Vec<[f32; 3]>) =
+        colours.iter().partition(|c| offset(c).iter().zip(&axis).map(|(a, b)| a * b).sum::<f32>() > 0.0);
+    (!ahead.is_empty() && !behind.is_empty()).then(|| [median_colour(&behind), median_colour(&ahead)])
 }
 
 /// `colour` over the sum of its channels (0.1 at least): its hue and saturation without its
@@ -625,6 +669,30 @@ mod tests {
             (0..100).map(|k| if k < lit_share { lit } else { shaded }).collect()
         };
         assert_eq!(two_colours(&bark(70), &bark(30)), None);
+    }
+
+    #[test]
+    fn two_colours_as_many_as_each_other_are_found() {
+        // a blue sprinkle on pink icing, 80 colours of each: the median of all lies between them
+        // (red 0.5), every colour is as far off it, and so is their median; the 2-means from those
+        // two emptied a cluster and found no colours
+        let (blue, pink) = ([0.2, 0.49, 0.78], [0.8, 0.57, 0.76]);
+        let mix = |blue_share: usize| -> Vec<[f32; 3]> {
+            (0..80).map(|k| if k < blue_share { blue } else { pink }).collect()
+        };
+        let colours = two_colours(&mix(50), &mix(30)).unwrap();
+        assert!(
+            colour_distance(colours.part, blue) < 0.01 && colour_distance(colours.surround, pink) < 0.01,
+            "{colours:?}"
+        );
+        // and a highlight far off both does not take a cluster of its own
+        let mut ring = mix(30);
+        ring[79] = [1.0, 1.0, 1.0];
+        let colours = two_colours(&mix(50), &ring).unwrap();
+        assert!(
+            colour_distance(colours.part, blue) < 0.01 && colour_distance(colours.surround, pink) < 0.01,
+            "{colours:?}"
+        );
     }
 
     #[test]
