@@ -5,15 +5,17 @@ issue's jitter (3-8 px of noise, R given) does not show what a pixel does to the
 a rod that comes out shorter (the distances count only where the rods overlap). Both cores, about
 a minute (docs/extraction.md, "A pixel's shift").
 
-    python benches/real_case_shifts.py [--only SUBSTRING] [--all]
+    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F]
 
 Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
-its length, or whose R estimates spread over 1.3 x; `--all` lists every view.
+its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `--save F` writes
+every view's figures to F (JSON); `--against F` lists the views whose figures moved since F.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from multiprocessing import Pool
 from pathlib import Path
@@ -95,13 +97,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", default="", help="cases whose name holds this")
     parser.add_argument("--all", action="store_true", help="list every view, not only those missing a bound")
+    parser.add_argument("--save", help="write every view's figures to this JSON file")
+    parser.add_argument("--against", help="list the views whose figures moved since this file")
     args = parser.parse_args()
+    every = []
     with Pool(2) as pool:
         for file, what in SETS:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
             jobs = [(file, k) for k, case in enumerate(cases) if args.only in case["name"]]
             rows = [row for rows in pool.map(score, jobs, chunksize=1) for row in rows]
+            every += rows
             count = {
                 "far": sum(max(r["given"]["far"], r["estimated"]["far"]) > FAR_R for r in rows),
                 "short": sum(min(r["given"]["short"], r["estimated"]["short"]) < SHORT for r in rows),
@@ -127,6 +133,36 @@ def main() -> None:
                     if args.all or flagged(r)
                 ],
             )
+    if args.against:
+        print_moved(every, json.loads(Path(args.against).read_text(encoding="utf-8")), args.against)
+    if args.save:
+        Path(args.save).write_text(json.dumps(every, indent=0), encoding="utf-8")
+
+
+def print_moved(rows: list[dict], before: list[dict], name: str) -> None:
+    """The views whose largest distance moved by over 0.1 R, least length by over 0.05 or estimates'
+    range by over 0.05 x R since `before` (with R given / R estimated)."""
+    old = {r["view"]: r for r in before}
+
+    def moved(a: dict, b: dict) -> bool:
+        return any(
+            abs(a[kind][key] - b[kind][key]) > limit
+            for kind in ("given", "estimated")
+            for key, limit in (("far", 0.1), ("short", 0.05), ("low", 0.05), ("high", 0.05))
+        )
+
+    def figures(r: dict) -> str:
+        g, e = r["given"], r["estimated"]
+        return f"{g['far']:.2f} / {g['short']:.2f} / {e['low']:.2f}-{e['high']:.2f} / {e['far']:.2f} / {e['short']:.2f}"
+
+    changed = [
+        [r["view"], figures(old[r["view"]]), figures(r)] for r in rows if r["view"] in old and moved(old[r["view"]], r)
+    ]
+    print_table(
+        f"views that moved since {name}: {len(changed)} (R given: max, least length / R estimated: R / R, max, least length)",
+        ["view", "before", "now"],
+        changed,
+    )
 
 
 if __name__ == "__main__":
