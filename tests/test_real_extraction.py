@@ -98,6 +98,31 @@ def test_no_unjittered_stroke_fails(scored, name):
         )
 
 
+@pytest.mark.parametrize("group", sorted(CASE_FILES))
+def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
+    """Every view's stroke moved by a pixel left, right, up or down gives a rod with R estimated,
+    where the radius estimate and the depth chain decide most (benches/real_case_shifts.py measures
+    how far such rods move; docs/extraction.md, "A pixel's shift")."""
+    from sketchrodgs import render
+    from sketchrodgs.errors import PathNotFoundError
+    from sketchrodgs.realcases import SOLID_OUTPUTS
+
+    scenes, cases = load_cases(CASE_FILES[group])
+    failed = []
+    for case in cases:
+        scene = scenes[case["scene"]]
+        for view in case["views"]:
+            camera = Camera.from_dict(view["camera"], view["name"])
+            stroke = np.asarray(view["stroke"], np.float64)
+            images = render(scene, camera, outputs=SOLID_OUTPUTS)
+            for offset in ((-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)):
+                try:
+                    extract_rod(scene, camera, stroke + offset, render=images)
+                except PathNotFoundError as error:
+                    failed.append(f"{case['name']}/{view['name']} {offset}: {error}")
+    assert not failed, failed
+
+
 def test_at_most_3_percent_of_jittered_strokes_fail(scored):
     failures = sum(score.jitter_failures for _, score in scored.values())
     count = sum(score.jitter_count for _, score in scored.values())
