@@ -82,15 +82,15 @@ def score(job: tuple[str, int]) -> list[dict]:
     return rows
 
 
-def flagged(row: dict) -> bool:
-    """Whether a view's shifted rods miss any of the bounds."""
+def missed(row: dict) -> dict[str, bool]:
+    """Which of the bounds a view's shifted rods miss."""
     g, e = row["given"], row["estimated"]
-    return (
-        max(g["far"], e["far"]) > FAR_R
-        or min(g["short"], e["short"]) < SHORT
-        or e["high"] / e["low"] > SPREAD
-        or g["failed"] + e["failed"] > 0
-    )
+    return {
+        "far": max(g["far"], e["far"]) > FAR_R,
+        "short": min(g["short"], e["short"]) < SHORT,
+        "spread": e["high"] / e["low"] > SPREAD,
+        "failed": g["failed"] + e["failed"] > 0,
+    }
 
 
 def main() -> None:
@@ -108,12 +108,8 @@ def main() -> None:
             jobs = [(file, k) for k, case in enumerate(cases) if args.only in case["name"]]
             rows = [row for rows in pool.map(score, jobs, chunksize=1) for row in rows]
             every += rows
-            count = {
-                "far": sum(max(r["given"]["far"], r["estimated"]["far"]) > FAR_R for r in rows),
-                "short": sum(min(r["given"]["short"], r["estimated"]["short"]) < SHORT for r in rows),
-                "spread": sum(r["estimated"]["high"] / r["estimated"]["low"] > SPREAD for r in rows),
-                "failed": sum(r["given"]["failed"] + r["estimated"]["failed"] for r in rows),
-            }
+            count = {bound: sum(missed(r)[bound] for r in rows) for bound in ("far", "short", "spread")}
+            count["failed"] = sum(r["given"]["failed"] + r["estimated"]["failed"] for r in rows)
             print_table(
                 f"{what}, {len(rows)} views shifted by a pixel: {count['far']} with a rod over {FAR_R} R away, "
                 f"{count['short']} under {SHORT:.0%} of the length, {count['spread']} with R over {SPREAD} x apart, "
@@ -130,7 +126,7 @@ def main() -> None:
                         str(r["given"]["failed"] + r["estimated"]["failed"]),
                     ]
                     for r in rows
-                    if args.all or flagged(r)
+                    if args.all or any(missed(r).values())
                 ],
             )
     if args.against:

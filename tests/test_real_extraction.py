@@ -21,6 +21,7 @@ import pytest
 from conftest import close_up
 from sketchrodgs import Camera
 from sketchrodgs.extract import extract_rod
+from sketchrodgs.polyline import polyline_length
 from sketchrodgs.realcases import TARGETS, load_cases, run_case, score_case
 
 DATA = Path(__file__).parent / "data" / "real_cases"
@@ -250,7 +251,7 @@ def test_a_stem_whose_path_breaks_at_a_petiole_in_front_keeps_its_length():
     given = extract_rod(scene, camera, stroke, radius=case["radius"])
     estimated = extract_rod(scene, camera, stroke)
     assert len(estimated.pixel_path) == 2  # the break
-    lengths = [np.linalg.norm(np.diff(rod.polyline, axis=0), axis=1).sum() for rod in (given, estimated)]
+    lengths = [polyline_length(rod.polyline) for rod in (given, estimated)]
     assert lengths[1] >= 0.9 * lengths[0], np.array(lengths) / case["radius"]
     assert end_gap(estimated) <= TARGETS["end_gap"], end_gap(estimated)
 
@@ -263,7 +264,7 @@ def test_a_petiole_stroke_shifted_by_a_pixel_keeps_its_length():
     (docs/extraction.md, "Stroke clean-up" 6, and "A pixel's shift")."""
     scene, case, camera, stroke = _case_view("heldout", "plant_petiole_right", "az000")
     lengths = [
-        np.linalg.norm(np.diff(extract_rod(scene, camera, s, radius=case["radius"]).polyline, axis=0), axis=1).sum()
+        polyline_length(extract_rod(scene, camera, s, radius=case["radius"]).polyline)
         for s in (stroke, stroke + [-1.0, 1.0])
     ]
     assert lengths[1] >= 0.8 * lengths[0], np.array(lengths) / case["radius"]

@@ -176,7 +176,8 @@ impl DistanceField {
             return None;
         }
         let unit = (to - from) / scale;
-        let (length, dir) = (scale * unit.length(), unit / unit.length());
+        let unit_length = unit.length();
+        let (length, dir) = (scale * unit_length, unit / unit_length);
         let clearance = |s: f64| self.sample(from + s * dir).map_or(f64::INFINITY, |(d, _)| d - radius);
         let (mut free, mut s) = (0.0, 0.0);
         let hit = loop {
