@@ -327,3 +327,24 @@ def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
     agreement = polyline_agreement(far_rod.polyline, rod.polyline, case["radius"])
     assert agreement["mean"] <= TARGETS["cross_mean"] and agreement["max"] <= TARGETS["cross_max"], agreement
     assert TARGETS["radius_low"] <= rod.radius / case["radius"] <= TARGETS["radius_high"], rod.radius
+
+
+def test_a_stroke_beside_a_leaf_stalk_over_a_faint_haze_keeps_its_rod_on_the_stalk():
+    """The leaf stalk rising left from the plant's lowest node in az000 (not a case; stroked on
+    2026-12-05 a few pixels right of its middle). Right of it one big Gaussian, 0.04 opaque and a
+    tenth of the plant wide, owns the pixels (alpha 0.01-0.04: nothing solid). Jittered strokes
+    over it took it for a slender surface 10 R behind the stalk, and 4 of 10 rods ran onto the leaf
+    behind, 19 R away or sharing nothing with the rod as drawn. A surface with no solid pixel near
+    a sample is a haze (docs/extraction.md, "Stroke clean-up" 2)."""
+    import zlib
+
+    from sketchrodgs.consistency import jittered_strokes, polyline_agreement
+
+    scene, _, camera, _ = _case_view("cases", "plant_main_stem", "az000")
+    radius = 0.0064  # half the stalk's visible width, as estimated (0.0061-0.0065)
+    stroke = np.array([[438.0, 322.0], [448.0, 340.0], [458.0, 356.0], [468.0, 372.0], [476.0, 384.0]])
+    drawn = extract_rod(scene, camera, stroke, radius=radius)
+    assert polyline_length(drawn.polyline) >= 10 * radius
+    for jittered in jittered_strokes(stroke, count=10, seed=zlib.crc32(b"plant leaf stalk/az000")):
+        rod = extract_rod(scene, camera, jittered, radius=radius)
+        assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= TARGETS["jitter_max"]

@@ -570,7 +570,9 @@ fn arc_lengths(points: &[[f32; 2]]) -> Vec<f32> {
 /// (the front and those behind it), grouped by depth (a gap over a third of `depth_gap` starts a
 /// new surface), each represented by its pixel nearest the point. A surface scores higher the
 /// nearer it is, the less it is wider across the stroke (direction `normal`) than the part (given
-/// `slender` = (R, focal length)), and when it is visible there rather than behind another.
+/// `slender` = (R, focal length)), and when it is visible there rather than behind another. A
+/// surface of the front with no solid pixel here is a haze, not a surface (docs/extraction.md,
+/// "Stroke clean-up" 2).
 fn surfaces_near(
     image: &IndexImage,
     walks: &mut Walks,
@@ -598,50 +600,69 @@ fn surfaces_near(
     // own, so that a leaf sloping back towards a stem hidden behind it does not merge with the
     // stem into one surface
     let order = depth_order(&pixels);
-    // (depth of the nearest pixel, its distance, pixel count, that pixel, its layer)
-    let mut surfaces: Vec<(f32, f32, usize, usize, usize)> = Vec::new();
+    let mut surfaces: Vec<Surface> = Vec::new();
     let mut last_z = f32::NAN;
     for &i in &order {
         let (z, d, p, layer) = pixels[i];
         let previous_z = std::mem::replace(&mut last_z, z);
+        // layers behind offer solid pixels only (`layers_at`)
+        let solid = layer > 0 || image.covered(p);
         match surfaces.last_mut() {
-            Some(s) if s.4 == layer && z - previous_z <= split => {
-                s.2 += 1;
-                if d < s.1 {
-                    (s.0, s.1, s.3) = (z, d, p);
+            Some(s) if s.layer == layer && z - previous_z <= split => {
+                s.count += 1;
+                s.solid |= solid;
+                if d < s.distance {
+                    (s.depth, s.distance, s.pixel) = (z, d, p);
                 }
             }
-            _ => surfaces.push((z, d, 1, p, layer)),
+            _ => surfaces.push(Surface { depth: z, distance: d, count: 1, pixel: p, layer, solid }),
         }
     }
-    // a lone pixel is a stray Gaussian unless it is right under the point
-    surfaces.retain(|s| s.2 >= 2 || s.1 <= 1.0);
-    surfaces.sort_by(|a, b| a.1.total_cmp(&b.1));
+    // a lone pixel is a stray Gaussian unless it is right under the point; a surface without a
+    // solid pixel is a haze (a big faint Gaussian owning the pixels beside a stalk, 0.04 opaque)
+    surfaces.retain(|s| s.solid && (s.count >= 2 || s.distance <= 1.0));
+    surfaces.sort_by(|a, b| a.distance.total_cmp(&b.distance));
     // the nearest visible ones and the nearest behind, each on their own: what lies behind never
     // crowds out a visible surface (the chain over visible ones is the same with layers or without)
     let (mut visible, mut hidden) = (0, 0);
     surfaces.retain(|s| {
-        let count = if s.4 == 0 { &mut visible } else { &mut hidden };
+        let count = if s.layer == 0 { &mut visible } else { &mut hidden };
         *count += 1;
         *count <= MAX_CANDIDATES
     });
     surfaces
         .iter()
         .map(|s| {
-            let near = 1.0 - 0.5 * (s.1 / reach_px.max(1.0)).min(1.0);
+            let near = 1.0 - 0.5 * (s.distance / reach_px.max(1.0)).min(1.0);
             // a surface behind another is measured on what lies behind the depth gap in front of it
-            let seen = if s.4 == 0 { *image } else { image.seen_from_depth(s.0 - depth_gap) };
-            let wide = slender.map_or(0.0, |(radius, focal)| walks.excess_width(&seen, s.3, normal, focal, radius));
-            let hidden = if s.4 == 0 { 1.0 } else { HIDDEN_SCORE };
+            let seen = if s.layer == 0 { *image } else { image.seen_from_depth(s.depth - depth_gap) };
+            let wide = slender.map_or(0.0, |(radius, focal)| walks.excess_width(&seen, s.pixel, normal, focal, radius));
+            let hidden = if s.layer == 0 { 1.0 } else { HIDDEN_SCORE };
             Candidate {
-                depth: s.0,
+                depth: s.depth,
                 score: hidden * near * (1.0 - WIDE_SCORE * wide / WIDE_CAP),
-                pixel: s.3,
-                layer: s.4,
+                pixel: s.pixel,
+                layer: s.layer,
                 wide,
             }
         })
         .collect()
+}
+
+/// One surface near a stroke sample, as `surfaces_near` groups them.
+struct Surface {
+    /// Depth of its pixel nearest the sample.
+    depth: f32,
+    /// That pixel's distance from the sample.
+    distance: f32,
+    /// How many pixels it has within reach.
+    count: usize,
+    /// That pixel.
+    pixel: usize,
+    /// 0: visible; else the layer behind the front it lies in.
+    layer: usize,
+    /// Whether any of its pixels is solid (accumulated opacity at least 0.5 where known).
+    solid: bool,
 }
 
 /// The bits of `z`, flipped so that they order as `f32::total_cmp` orders the values.

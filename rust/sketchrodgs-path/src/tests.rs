@@ -336,6 +336,33 @@ fn the_path_keeps_off_a_wide_surface_touching_the_part() {
 }
 
 #[test]
+fn a_faint_haze_beside_the_part_is_not_a_surface_to_follow() {
+    // One big faint Gaussian (0.04 opaque, its centre far off, depth 6) owns the pixels below the
+    // rope, where the stroke runs 3-4 px off it. Its pixels are not solid: it is a haze, and the rod
+    // stays on the rope (a leaf stalk of the plant in az000, with such a Gaussian beside it).
+    let mut scene = Synthetic::new(80, 40, FOCAL, rope);
+    let haze = scene.centres.len() as i32;
+    scene.centres.push([4.0, 3.0, 6.0]);
+    let mut alpha = vec![0.0_f32; scene.width * scene.height];
+    for row in 0..scene.height {
+        for col in 0..scene.width {
+            let p = row * scene.width + col;
+            if scene.index[p] >= 0 {
+                alpha[p] = 1.0;
+            } else if (22..=34).contains(&row) && (4..=76).contains(&col) {
+                (scene.index[p], scene.depth[p], alpha[p]) = (haze, 6.0, 0.04);
+            }
+        }
+    }
+    let image = scene.image().with_alpha(&alpha).unwrap();
+    let params = TraceParams { radius: 0.05, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
+    let trace = trace_stroke(&image, &scene.centres, &[[4.5, 24.5], [40.5, 23.5], [76.5, 24.5]], &params).unwrap();
+    let pixels: Vec<&[u32; 2]> = trace.pieces.iter().flat_map(|p| p.pixels.iter()).collect();
+    assert!(pixels.iter().all(|p| (19..=21).contains(&p[1])), "{pixels:?}");
+    assert!(pixels.iter().any(|p| p[0] <= 12) && pixels.iter().any(|p| p[0] >= 68), "{pixels:?}");
+}
+
+#[test]
 fn the_radius_is_half_the_visible_width() {
     // The rope is 3 px thick at depth 5 with a focal length of 100: R = 1.5 px * 5 / 100.
     let scene = Synthetic::new(80, 40, FOCAL, rope);
