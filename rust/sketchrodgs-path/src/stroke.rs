@@ -605,17 +605,17 @@ fn surfaces_near(
     for &i in &order {
         let (z, d, p, layer) = pixels[i];
         let previous_z = std::mem::replace(&mut last_z, z);
-        // layers behind offer solid pixels only (`layers_at`)
-        let solid = layer > 0 || image.covered(p);
+        // layers behind offer solid pixels only (`layers_at`); a surface's first solid pixel settles it
+        let solid = |p: usize| layer > 0 || image.covered(p);
         match surfaces.last_mut() {
             Some(s) if s.layer == layer && z - previous_z <= split => {
                 s.count += 1;
-                s.solid |= solid;
+                s.solid = s.solid || solid(p);
                 if d < s.distance {
                     (s.depth, s.distance, s.pixel) = (z, d, p);
                 }
             }
-            _ => surfaces.push(Surface { depth: z, distance: d, count: 1, pixel: p, layer, solid }),
+            _ => surfaces.push(Surface { depth: z, distance: d, count: 1, pixel: p, layer, solid: solid(p) }),
         }
     }
     // a lone pixel is a stray Gaussian unless it is right under the point; a surface without a
