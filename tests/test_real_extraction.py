@@ -333,8 +333,8 @@ def test_a_stroke_beside_a_leaf_stalk_over_a_faint_haze_keeps_its_rod_on_the_sta
     """The leaf stalk rising left from the plant's lowest node in az000 (not a case; stroked on
     2026-12-05 a few pixels right of its middle). Right of it one flat Gaussian, 0.04 opaque and of
     scale 0.1 (the stalk's half-width is 0.0064), owns the pixels (alpha 0.01-0.04: nothing solid). Jittered strokes
-    over it took it for a slender surface 10 R behind the stalk, and 4 of 10 rods ran onto the leaf
-    behind, 19 R away or sharing nothing with the rod as drawn. A surface with no solid pixel near
+    over it took it for a slender surface 10 R behind the stalk, and 3 of these 10 rods ran onto the
+    leaf behind, 19 R away or sharing nothing with the rod as drawn. A surface with no solid pixel near
     a sample is a haze (docs/extraction.md, "Stroke clean-up" 2)."""
     import zlib
 
