@@ -19,10 +19,20 @@ import numpy as np
 import pytest
 
 from conftest import close_up
-from sketchrodgs import Camera
+from sketchrodgs import Camera, render
+from sketchrodgs.consistency import jittered_strokes, polyline_agreement
+from sketchrodgs.errors import PathNotFoundError
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.polyline import polyline_length
-from sketchrodgs.realcases import TARGETS, load_cases, run_case, score_case
+from sketchrodgs.realcases import (
+    SOLID_OUTPUTS,
+    TARGETS,
+    end_gap,
+    jitter_seed,
+    load_cases,
+    run_case,
+    score_case,
+)
 
 DATA = Path(__file__).parent / "data" / "real_cases"
 CASE_FILES = {
@@ -104,10 +114,6 @@ def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
     """Every view's stroke moved by a pixel left, right, up or down gives a rod with R estimated,
     where the radius estimate and the depth chain decide most (benches/real_case_shifts.py measures
     how far such rods move; docs/extraction.md, "A pixel's shift")."""
-    from sketchrodgs import render
-    from sketchrodgs.errors import PathNotFoundError
-    from sketchrodgs.realcases import SOLID_OUTPUTS
-
     scenes, cases = load_cases(CASE_FILES[group])
     failed = []
     for case in cases:
@@ -225,8 +231,6 @@ def test_a_sprinkle_stroked_over_the_icing_beside_it_keeps_its_rod_on_the_sprink
     sprinkle's depth and its Gaussians are large, so by depth, width and length the path followed
     the stroke onto it, and the rod ran 4.7 R off the rod of the stroke as drawn. The icing's pink
     keeps the path on the sprinkle's blue (docs/extraction.md, "A part lying on a surface")."""
-    from sketchrodgs.consistency import polyline_agreement
-
     scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_14", "az000")
     drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
     jittered = np.array(
@@ -245,8 +249,6 @@ def test_a_stem_whose_path_breaks_at_a_petiole_in_front_keeps_its_length():
     the petiole, and the corner cut took the 11 R from the dip to the rod's end: the rod was 22 R
     long against 31 R with R given. The climbed pixels are taken off (docs/extraction.md, "Piece
     ends on an occluder"), and the rod spans the stem either way."""
-    from sketchrodgs.realcases import end_gap
-
     scene, case, camera, stroke = _case_view("heldout", "plant_stem_back", "az270")
     given = extract_rod(scene, camera, stroke, radius=case["radius"])
     estimated = extract_rod(scene, camera, stroke)
@@ -277,12 +279,8 @@ def test_a_jittered_stroke_over_a_sprinkle_as_much_on_the_icing_finds_both_colou
     path had no colour term, and the rod ran over the icing, 4.9 R from the rod as drawn. The
     2-means now starts again from the two sides of the median (docs/extraction.md, "A part lying on
     a surface")."""
-    import zlib
-
-    from sketchrodgs.consistency import jittered_strokes, polyline_agreement
-
     scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_14", "az000")
-    jittered = jittered_strokes(stroke, count=10, seed=zlib.crc32(b"sprinkle_14/az000") + 4)[2]
+    jittered = jittered_strokes(stroke, count=10, seed=jitter_seed("sprinkle_14", "az000", 4))[2]
     drawn, rod = (extract_rod(scene, camera, s, radius=case["radius"]) for s in (stroke, jittered))
     assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
 
@@ -316,8 +314,6 @@ def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
     over the layers behind scored more than the visible one but, cut to its visible ends, spanned two
     neighbouring samples: the path was one pixel, and the stroke was refused as too short. The rod
     is the far view's, within the issue's targets."""
-    from sketchrodgs.consistency import polyline_agreement
-
     scene, case, far, stroke = _case_view("heldout", "donut_sprinkle_c", "az180")
     far_rod = extract_rod(scene, far, stroke, radius=case["radius"])
     depth = float(np.median(far.project(far_rod.polyline.astype(np.float64))[1]))
@@ -332,19 +328,15 @@ def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
 def test_a_stroke_beside_a_leaf_stalk_over_a_faint_haze_keeps_its_rod_on_the_stalk():
     """The leaf stalk rising left from the plant's lowest node in az000 (not a case; stroked on
     2026-12-05 a few pixels right of its middle). Right of it one flat Gaussian, 0.04 opaque and of
-    scale 0.1 (the stalk's half-width is 0.0064), owns the pixels (alpha 0.01-0.04: nothing solid). Jittered strokes
-    over it took it for a slender surface 10 R behind the stalk, and 3 of these 10 rods ran onto the
-    leaf behind, 19 R away or sharing nothing with the rod as drawn. A surface with no solid pixel near
-    a sample is a haze (docs/extraction.md, "Stroke clean-up" 2)."""
-    import zlib
-
-    from sketchrodgs.consistency import jittered_strokes, polyline_agreement
-
+    scale 0.1 (the stalk's half-width is 0.0064), owns the pixels (alpha 0.01-0.04: nothing solid).
+    Jittered strokes over it took it for a slender surface 10 R behind the stalk, and 3 of these 10
+    rods ran onto the leaf behind, 19 R away or sharing nothing with the rod as drawn. A surface with
+    no solid pixel near a sample is a haze (docs/extraction.md, "Stroke clean-up" 2)."""
     scene, _, camera, _ = _case_view("cases", "plant_main_stem", "az000")
     radius = 0.0064  # half the stalk's visible width, as estimated (0.0061-0.0065)
     stroke = np.array([[438.0, 322.0], [448.0, 340.0], [458.0, 356.0], [468.0, 372.0], [476.0, 384.0]])
     drawn = extract_rod(scene, camera, stroke, radius=radius)
     assert polyline_length(drawn.polyline) >= 10 * radius
-    for jittered in jittered_strokes(stroke, count=10, seed=zlib.crc32(b"plant leaf stalk/az000")):
+    for jittered in jittered_strokes(stroke, count=10, seed=jitter_seed("plant leaf stalk", "az000")):
         rod = extract_rod(scene, camera, jittered, radius=radius)
         assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= TARGETS["jitter_max"]

@@ -165,8 +165,7 @@ def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10, draw:
         result = ViewResult(
             view["name"], attempt(stroke, radius), attempt(stroke, None), attempt(cs.reversed_stroke(stroke), radius)
         )
-        seed = zlib.crc32(f"{case['name']}/{view['name']}".encode()) + draw
-        for s in cs.jittered_strokes(stroke, count=jitter, seed=seed):
+        for s in cs.jittered_strokes(stroke, count=jitter, seed=jitter_seed(case["name"], view["name"], draw)):
             try:
                 result.jittered.append(extract_rod(scene, camera, s, radius=radius, render=images))
             except PathNotFoundError:
@@ -174,6 +173,12 @@ def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10, draw:
         result.errors = errors
         results.append(result)
     return results
+
+
+def jitter_seed(case_name: str, view_name: str, draw: int = 0) -> int:
+    """The seed of a view's jittered strokes in `run_case` (`draw` as there), so that one of them
+    can be drawn again on its own."""
+    return zlib.crc32(f"{case_name}/{view_name}".encode()) + draw
 
 
 def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
