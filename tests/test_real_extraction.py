@@ -32,6 +32,7 @@ from sketchrodgs.realcases import (
     load_cases,
     run_case,
     score_case,
+    turned_camera,
 )
 
 DATA = Path(__file__).parent / "data" / "real_cases"
@@ -340,3 +341,21 @@ def test_a_stroke_beside_a_leaf_stalk_over_a_faint_haze_keeps_its_rod_on_the_sta
     for jittered in jittered_strokes(stroke, count=10, seed=jitter_seed("plant leaf stalk", "az000")):
         rod = extract_rod(scene, camera, jittered, radius=radius)
         assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= TARGETS["jitter_max"]
+
+
+def test_a_stroke_over_the_leaf_hiding_the_main_stem_follows_the_stem_behind_it():
+    """The plant's main stem seen from behind (the az000 camera turned 180 degrees about the stem;
+    not a case, stroked on 2026-12-06), where a leaf covers its left half over a third of the
+    stroke. A stroke drawn 6-8 px left of the stem runs over the leaf there: the visible chain took
+    the leaf, 3-9 R in front, and the rod ran up its face, 11 R from the rod as drawn. Over the
+    whole stroke the chain behind gains 13 %, under `BEHIND_GAIN`; over the stretch where the two
+    differ, where the visible one lies on the leaf, 38 % (docs/extraction.md, "What lies behind")."""
+    scene, _, camera, _ = _case_view("cases", "plant_main_stem", "az000")
+    behind = turned_camera(camera, np.array([0.007, -0.136, 0.020]), "up", 180.0, name="az000 turned 180")
+    drawn = extract_rod(scene, behind, np.array([[506.0, 525], [503, 490], [498, 455], [494, 420], [492, 395]]))
+    beside = extract_rod(
+        scene, behind, np.array([[502.0, 536], [508, 533], [506, 491], [494, 462], [486, 395], [501, 385]])
+    )
+    assert polyline_agreement(drawn.polyline, beside.polyline, drawn.radius)["max"] <= TARGETS["jitter_max"]
+    # on the stem, not on the leaf in front of it
+    assert behind.project(beside.polyline)[1].min() >= behind.project(drawn.polyline)[1].min() - drawn.radius
