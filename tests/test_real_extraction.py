@@ -347,9 +347,9 @@ def test_a_stroke_over_the_leaf_hiding_the_main_stem_follows_the_stem_behind_it(
     """The plant's main stem seen from behind (the az000 camera turned 180 degrees about the stem;
     not a case, stroked on 2026-12-06), where a leaf covers its left half over a third of the
     stroke. A stroke drawn 6-8 px left of the stem runs over the leaf there: the visible chain took
-    the leaf, 3-9 R in front, and the rod ran up its face, 11 R from the rod as drawn. Over the
-    whole stroke the chain behind gains 13 %, under `BEHIND_GAIN`; over the stretch where the two
-    differ, where the visible one lies on the leaf, 38 % (docs/extraction.md, "What lies behind")."""
+    the leaf, 3-9 R in front, and its rod lay on the leaf, 11 R from the rod as drawn. Over the
+    whole stroke the chain behind gains 14 %, under `BEHIND_GAIN`; over the stretch where the two
+    differ, where the visible one lies on the leaf, 48 % (docs/extraction.md, "What lies behind")."""
     scene, _, camera, _ = _case_view("cases", "plant_main_stem", "az000")
     behind = turned_camera(camera, np.array([0.007, -0.136, 0.020]), "up", 180.0, name="az000 turned 180")
     drawn = extract_rod(scene, behind, np.array([[506.0, 525], [503, 490], [498, 455], [494, 420], [492, 395]]))
