@@ -359,3 +359,20 @@ def test_a_stroke_over_the_leaf_hiding_the_main_stem_follows_the_stem_behind_it(
     assert polyline_agreement(drawn.polyline, beside.polyline, drawn.radius)["max"] <= TARGETS["jitter_max"]
     # on the stem, not on the leaf in front of it
     assert behind.project(beside.polyline)[1].min() >= behind.project(drawn.polyline)[1].min() - drawn.radius
+
+
+def test_a_stroke_ending_over_a_nearer_branch_that_hides_the_part_is_not_refused():
+    """A jittered stroke over the tree's lower left branch in az045 (the case's stroke, drawn again
+    with hand noise: it doubles back near its end) ends over a nearer branch, 10 R in front, that
+    hides the part there. Its depth chain keeps to the part, whose nearest pixel to the last samples
+    lies at the edge of the band; no band pixel lies near the stroke's last sample, and the stroke
+    was refused as meeting the object at one sample. The search's end now moves inwards to the
+    first sample with band pixels near it (docs/extraction.md, "Search")."""
+    scene, case, camera, stroke = _case_view("cases", "tree_branch_lower_left", "az045")
+    drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
+    jittered = np.array(
+        [[326.1, 328.5], [323.9, 324.7], [328.3, 369.4], [324.3, 372.8], [344.3, 389.3]]
+        + [[347.4, 419.2], [330.4, 411.7], [346.7, 431.0], [340.0, 438.8], [348.1, 436.7]]
+    )
+    rod = extract_rod(scene, camera, jittered, radius=case["radius"])
+    assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]

@@ -90,20 +90,22 @@ pub fn trace_stroke(
     let floors = clean.floors(image, gap, params.band_px + WALK_RADII * radius_px);
     let image = &image.seen_from_cells(&floors);
     let band = label_band(image, &clean, params.band_px, gap);
-    // the clean stroke starts and ends on the object, so both ends have band pixels near them
+    // The clean stroke starts and ends on the object, so its ends nearly always have band pixels
+    // near them. Where the chain's end members are the part seen only at the edge of the band (a
+    // nearer branch hides it under the stroke's end), an end has none: it moves inwards to the
+    // first sample that has, rather than refusing a stroke that lies on the part.
     let last = clean.points.len() - 1;
-    let endpoint = |j: usize| {
-        snap(image, &band, clean.points[j], clean.arc[j], params.band_px)
-            .ok_or(PathError::StrokeBarelyOnObject { samples: 1 })
-    };
-    let mut start = endpoint(0)?;
-    let goal = endpoint(last)?;
+    let snapped = |j: usize| snap(image, &band, clean.points[j], clean.arc[j], params.band_px).map(|node| (j, node));
+    let ((first, mut start), (_, goal)) = (0..=last)
+        .find_map(snapped)
+        .zip((0..=last).rev().find_map(snapped))
+        .ok_or(PathError::StrokeBarelyOnObject { samples: 1 })?;
 
     let colours = surface_colours(image, &band, &clean, &params, gap);
     let mut search = Search::new(image, centres, &band, &clean, &params, gap, colours.as_ref());
     let mut covered = CoverMask::new(image.width, image.height, params.cover_px);
     let mut pieces = Vec::new();
-    let mut start_sample = 0; // the chain sample each piece starts from: it moves on every time
+    let mut start_sample = first; // the chain sample each piece starts from: it moves on every time
     loop {
         let (end_node, reached) = search.run(start, goal);
         let pixels = search.path_to(end_node);
