@@ -297,8 +297,8 @@ fn gains_where_they_differ(
         _ => false,
     };
     // (within the chain behind: what the visible chain has beyond it, the cut to its ends drops)
-    let differ: Vec<usize> = (start.0..=end.0).filter(|&i| !same(on_behind[i], on_visible[i])).collect();
-    let (Some(&from), Some(&to)) = (differ.first(), differ.last()) else {
+    let differs = |i: &usize| !same(on_behind[*i], on_visible[*i]);
+    let (Some(from), Some(to)) = ((start.0..=end.0).find(differs), (start.0..=end.0).rfind(differs)) else {
         return false;
     };
     if from <= start.0
