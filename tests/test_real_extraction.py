@@ -309,6 +309,21 @@ def test_a_branch_in_front_of_the_trunk_estimates_its_radius_from_its_silhouette
     assert TARGETS["radius_low"] <= rod.radius / 0.015 <= TARGETS["radius_high"], rod.radius
 
 
+def test_a_sprinkle_drawn_by_two_big_gaussians_is_not_refused_as_too_short():
+    """A jittered stroke over sprinkle_13 in az270 (the second draw's fifth) keeps 2 big Gaussians
+    on its path. Their centres lie 1.8 R apart (lightly smoothed), under the 2 R a rod needs, though
+    the pixels they show on the path span 3.3 R. The rod is then the line through those pixels, each
+    unprojected at its Gaussian's depth (docs/extraction.md, "Polyline, segmentation, binding")."""
+    scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_13", "az270")
+    radius = case["radius"]
+    drawn = extract_rod(scene, camera, stroke, radius=radius)
+    jittered = jittered_strokes(stroke, count=10, seed=jitter_seed("sprinkle_13", "az270", 1))[4]
+    rod = extract_rod(scene, camera, jittered, radius=radius)
+    assert len(rod.path_gaussian_ids) == 2
+    assert polyline_length(rod.polyline) >= 2 * radius
+    assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= 0.5
+
+
 def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():
     """The held-out sprinkle c as a viewer user sketches it: 0.06 away, looking as its az180 view
     does (fov 50 degrees, viser's near plane 0.01), stroked where that view's stroke lies. Its chain

@@ -405,6 +405,9 @@ def _extract(
     pieces = trace.pieces
 
     clock = time.perf_counter()
+    if len(points) >= 2 and pl.polyline_length(points) < 2 * radius:
+        line = _line_over_path_pixels(points, scene, camera, pieces, path_ids)
+        points = line if pl.polyline_length(line) > pl.polyline_length(points) else points
     if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
         length = pl.polyline_length(points) if len(points) > 1 else 0.0
         raise _failure(
@@ -456,6 +459,34 @@ def _extract(
         rendered_tiles=None if given else float(partial.tiles.mean()),
         scene_identity=SceneIdentity.of(scene),
     )
+
+
+def _line_over_path_pixels(
+    points: np.ndarray, scene: GaussianScene, camera: Camera, pieces: list[_core.TracePiece], path_ids: np.ndarray
+) -> np.ndarray:
+    """The line fitted to the path's pixels that show one of the path's Gaussians `path_ids`, each
+    pixel unprojected at its Gaussian's depth, over their extent, in the direction of `points` (the
+    centres): where 2-3 big Gaussians draw a sprinkle, their centres span less than the part does
+    on screen (docs/extraction.md, "Polyline, segmentation, binding")."""
+    pixels = np.concatenate([p.pixels.astype(np.int64) for p in pieces])
+    ids = np.concatenate([p.pixel_ids.astype(np.int64) for p in pieces])
+    shown = np.isin(ids, path_ids)
+    pixels, ids = pixels[shown], ids[shown]
+    if len(pixels) < 2:
+        return points
+    depth = camera.project(np.take(scene.means, ids, axis=0))[1]
+    rays = np.stack(
+        [(pixels[:, 0] + 0.5 - camera.cx) / camera.fx, (pixels[:, 1] + 0.5 - camera.cy) / camera.fy, np.ones(len(ids))],
+        axis=1,
+    )
+    to_world = camera.camera_to_world
+    unprojected = (rays * depth[:, None]) @ to_world[:3, :3].T + to_world[:3, 3]
+    middle = unprojected.mean(axis=0)
+    direction = np.linalg.svd(unprojected - middle, full_matrices=False)[2][0]
+    if direction @ (points[-1] - points[0]) < 0:
+        direction = -direction
+    along = (unprojected - middle) @ direction
+    return np.stack([middle + along.min() * direction, middle + along.max() * direction])
 
 
 # A path piece lost where an occluder hides the part may have climbed onto it first: its pixels
