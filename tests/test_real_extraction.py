@@ -309,6 +309,24 @@ def test_a_branch_in_front_of_the_trunk_estimates_its_radius_from_its_silhouette
     assert TARGETS["radius_low"] <= rod.radius / 0.015 <= TARGETS["radius_high"], rod.radius
 
 
+def test_a_foot_receding_behind_a_leg_keeps_its_rod_past_the_leg():
+    """The stand's back foot in az090 (held out) recedes towards the camera, 17 R nearer at the
+    stroke's end than at its start, and a leg crosses in front of it halfway. The depth chain runs
+    from the foot onto the leg and steps back onto the foot, which then comes on to 2.6 depth gaps
+    in front of the leg, so the short-run rule took the foot's nearer half (61 px, under 4 R) for
+    a nearer part and cut it: the rod covered 42 % of the stroke. That run goes on as the chain before it went, and is kept
+    (docs/extraction.md, "Stroke clean-up")."""
+    scene, case, camera, stroke = _case_view("heldout", "guitar_stand_foot_back", "az090")
+    rod = extract_rod(scene, camera, stroke, radius=case["radius"])
+    on_screen = camera.project(rod.polyline)[0]
+    drawn = np.linalg.norm(np.diff(stroke, axis=0), axis=1).sum()
+    assert np.linalg.norm(np.diff(on_screen, axis=0), axis=1).sum() >= 0.85 * drawn
+    assert (
+        np.linalg.norm(on_screen[-1] - stroke[-1])
+        <= 2 * case["radius"] * camera.fx / camera.project(rod.polyline)[1][-1]
+    )
+
+
 def test_a_sprinkle_drawn_by_two_big_gaussians_is_not_refused_as_too_short():
     """A jittered stroke over sprinkle_13 in az270 (the second draw's fifth) keeps 2 big Gaussians
     on its path. Their centres lie 1.8 R apart (lightly smoothed), under the 2 R a rod needs, though

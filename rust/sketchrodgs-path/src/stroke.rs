@@ -62,6 +62,16 @@ const OCCLUDER_BROAD_SHARE: f32 = 0.5;
 /// finger of the tree in front of the one stroked; docs/extraction.md, "Stroke clean-up").
 const OCCLUDER_SHORT_STEP: f32 = 1.25;
 const OCCLUDER_SHORT_R: f32 = 4.0;
+/// Such a run is not cut where it goes on as the chain before it went (`goes_on_as_before`): a part
+/// receding towards the camera, crossed by a bar in front, steps from the bar back onto itself (the
+/// guitar stand's back foot behind a leg). The run keeps within `OCCLUDER_SHORT_STEP` gaps of (or
+/// behind) the line fitted to the chain's depths over the `TREND_R` radii on screen before the
+/// step, its own depth changes at least `TREND_SLOPE_SHARE` as fast the same way, and it has
+/// `TREND_MEMBERS` members or more: over fewer its slope is noise (a node's few members where a
+/// stem ends).
+const TREND_R: f32 = 8.0;
+const TREND_SLOPE_SHARE: f32 = 0.5;
+const TREND_MEMBERS: usize = 8;
 /// An end run that turns sharply in depth off the rest of the chain is a surface the stroke ran on
 /// past the part's end (a leaf seen edge-on, the soil, a side stem behind): a part turns that
 /// sharply only where it meets another. The turn is at the chain's farthest member (for a run
@@ -348,16 +358,34 @@ fn on_screen(radii: f32, depth_gap: f32, focal_px: f32, depth: f32) -> f32 {
 /// Least-squares slope of `depth` over the distance of `at` from `origin` (px along the stroke);
 /// None for fewer than 3 points.
 fn depth_slope(at: &[f32], depth: &[f32], origin: f32) -> Option<f32> {
-    if at.len() < 3 {
-        return None;
-    }
-    let n = at.len() as f32;
     let xs: Vec<f32> = at.iter().map(|a| (a - origin).abs()).collect();
-    let mx = xs.iter().sum::<f32>() / n;
-    let mz = depth.iter().sum::<f32>() / n;
-    let sxx: f32 = xs.iter().map(|x| (x - mx) * (x - mx)).sum();
-    let sxz: f32 = xs.iter().zip(depth).map(|(x, z)| (x - mx) * (z - mz)).sum();
-    (sxx > 0.0).then(|| sxz / sxx)
+    LineFit::of(&xs, depth).map(|line| line.slope)
+}
+
+/// The least-squares line of depth over arc (px along the stroke): through the means, with a slope.
+struct LineFit {
+    at: f32,
+    depth: f32,
+    slope: f32,
+}
+
+impl LineFit {
+    /// None for fewer than 3 points or all at one place.
+    fn of(at: &[f32], depth: &[f32]) -> Option<Self> {
+        if at.len() < 3 {
+            return None;
+        }
+        let n = at.len() as f32;
+        let ma = at.iter().sum::<f32>() / n;
+        let mz = depth.iter().sum::<f32>() / n;
+        let saa: f32 = at.iter().map(|a| (a - ma) * (a - ma)).sum();
+        let saz: f32 = at.iter().zip(depth).map(|(a, z)| (a - ma) * (z - mz)).sum();
+        (saa > 0.0).then(|| LineFit { at: ma, depth: mz, slope: saz / saa })
+    }
+
+    fn depth_at(&self, at: f32) -> f32 {
+        self.depth + self.slope * (at - self.at)
+    }
 }
 
 /// The turn rule (`TURN_DEG`) for the last members of `chain`, towards the camera and away from it.
@@ -508,11 +536,35 @@ fn cut_short_front_tail(
         }
         nearest = nearest.min(chain[k].1.depth);
         let before = chain[k - 1].1.depth;
-        if (chain[k].1.depth - before).abs() > depth_gap && nearest < before - OCCLUDER_SHORT_STEP * depth_gap {
+        if (chain[k].1.depth - before).abs() > depth_gap
+            && nearest < before - OCCLUDER_SHORT_STEP * depth_gap
+            && !goes_on_as_before(chain, arc, k, depth_gap, focal_px)
+        {
             chain.truncate(k);
             return;
         }
     }
+}
+
+/// Whether the end run `chain[k..]` goes on as the chain before it went (`TREND_R`).
+fn goes_on_as_before(chain: &[(usize, Candidate)], arc: &[f32], k: usize, depth_gap: f32, focal_px: f32) -> bool {
+    let run = &chain[k..];
+    if run.len() < TREND_MEMBERS {
+        return false;
+    }
+    let step = arc[chain[k - 1].0];
+    let window = on_screen(TREND_R, depth_gap, focal_px, chain[k - 1].1.depth);
+    let (at, depth): (Vec<f32>, Vec<f32>) =
+        chain[..k].iter().filter(|m| (step - arc[m.0]).abs() <= window).map(|m| (arc[m.0], m.1.depth)).unzip();
+    let Some(trend) = LineFit::of(&at, &depth) else {
+        return false;
+    };
+    let (at, depth): (Vec<f32>, Vec<f32>) = run.iter().map(|m| (arc[m.0], m.1.depth)).unzip();
+    let Some(own) = LineFit::of(&at, &depth) else {
+        return false;
+    };
+    own.slope * trend.slope >= TREND_SLOPE_SHARE * trend.slope * trend.slope
+        && run.iter().all(|m| m.1.depth >= trend.depth_at(arc[m.0]) - OCCLUDER_SHORT_STEP * depth_gap)
 }
 
 /// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed, on
@@ -976,6 +1028,36 @@ mod tests {
         chain[59].1.depth = 0.915;
         cut_occluder_ends(&mut chain, &arc, 0.03, 1000.0);
         assert_eq!(chain.len(), 55, "cut at the first step");
+    }
+
+    #[test]
+    fn a_run_stepped_in_front_that_goes_on_as_the_chain_went_is_kept() {
+        // 60 slender members 3 px apart, focal 1000 px, the gap 0.03 (R = 0.01, 11-13 px on screen).
+        // A foot receding towards the camera (depth 1 - 0.0012 per px), a bar in front of it over
+        // members 40-47 (flat at member 39's depth), then the last `count` members step 1.1 gaps
+        // in front of the bar, each at `depth(arc)`: 33 px, under 4 R, so the short-run rule cuts
+        // them unless they go on as the chain before them went.
+        let arc: Vec<f32> = (0..60).map(|i| 3.0 * i as f32).collect();
+        let receding = |a: f32| 1.0 - 0.0012 * a;
+        let cut = |count: usize, depth: &dyn Fn(f32) -> f32| {
+            let mut chain: Vec<_> = (0..60)
+                .map(|i| (i, Candidate { depth: receding(arc[i.min(39)]), score: 1.0, pixel: i, layer: 0, wide: 0.0 }))
+                .collect();
+            for m in &mut chain[60 - count..] {
+                m.1.depth = depth(arc[m.0]);
+            }
+            cut_occluder_ends(&mut chain, &arc, 0.03, 1000.0);
+            60 - chain.len()
+        };
+        assert_eq!(cut(12, &receding), 0, "the foot going on beyond the bar: kept");
+        assert_eq!(cut(12, &|_| 0.8), 12, "a nearer part, flat: cut");
+        assert_eq!(
+            cut(12, &|a| receding(a) - 0.2 * (a - 144.0) / 33.0),
+            12,
+            "coming on twice as fast past the line: cut"
+        );
+        assert_eq!(cut(12, &|a| 0.815 + 0.0006 * (a - 144.0)), 12, "receding the other way: cut");
+        assert_eq!(cut(6, &receding), 6, "6 members: too few to tell a trend");
     }
 
     #[test]
