@@ -1032,7 +1032,7 @@ mod tests {
 
     #[test]
     fn a_run_stepped_in_front_that_goes_on_as_the_chain_went_is_kept() {
-        // 60 slender members 3 px apart, focal 1000 px, the gap 0.03 (R = 0.01, 11-13 px on screen).
+        // 60 slender members 3 px apart, focal 1000 px, the gap 0.03 (R = 0.01, 10-13 px on screen).
         // A foot receding towards the camera (depth 1 - 0.0012 per px), a bar in front of it over
         // members 40-47 (flat at member 39's depth), then the last `count` members step 1.1 gaps
         // in front of the bar, each at `depth(arc)`: 33 px, under 4 R, so the short-run rule cuts
@@ -1054,7 +1054,7 @@ mod tests {
         assert_eq!(
             cut(12, &|a| receding(a) - 0.2 * (a - 144.0) / 33.0),
             12,
-            "coming on twice as fast past the line: cut"
+            "coming on far faster, past the line: cut"
         );
         assert_eq!(cut(12, &|a| 0.815 + 0.0006 * (a - 144.0)), 12, "receding the other way: cut");
         assert_eq!(cut(6, &receding), 6, "6 members: too few to tell a trend");
