@@ -327,6 +327,19 @@ def test_a_foot_receding_behind_a_leg_keeps_its_rod_past_the_leg():
     )
 
 
+def test_a_sprinkle_whose_chain_took_the_icing_for_a_stretch_keeps_its_rod_to_its_end():
+    """sprinkle_13 in az270, as drawn. Over a stretch of the stroke the sprinkle measures as wide
+    as the icing it lies on, and the depth chain takes the icing beside it instead, a depth gap
+    behind; then it steps back onto the sprinkle's near half. Against that one member behind, the
+    short-run rule took the sprinkle's near half for a nearer part and cut it: the rod covered 29 %
+    of the stroke. That run is level with the chain before it (its median depth), and is kept
+    (docs/extraction.md, "Stroke clean-up")."""
+    scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_13", "az270")
+    rod = extract_rod(scene, camera, stroke, radius=case["radius"])
+    on_screen = np.linalg.norm(np.diff(camera.project(rod.polyline)[0], axis=0), axis=1).sum()
+    assert on_screen >= 0.6 * np.linalg.norm(np.diff(stroke, axis=0), axis=1).sum()
+
+
 def test_a_sprinkle_drawn_by_two_big_gaussians_is_not_refused_as_too_short():
     """A jittered stroke over sprinkle_13 in az270 (the second draw's fifth) keeps 2 big Gaussians
     on its path. Their centres lie 1.8 R apart (lightly smoothed), under the 2 R a rod needs, though
@@ -339,7 +352,7 @@ def test_a_sprinkle_drawn_by_two_big_gaussians_is_not_refused_as_too_short():
     rod = extract_rod(scene, camera, jittered, radius=radius)
     assert len(rod.path_gaussian_ids) == 2
     assert polyline_length(rod.polyline) >= 2 * radius
-    assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= 0.5
+    assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= TARGETS["jitter_max"]
 
 
 def test_a_sprinkle_sketched_close_up_gives_the_rod_of_its_far_view():

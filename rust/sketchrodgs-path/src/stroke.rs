@@ -62,13 +62,18 @@ const OCCLUDER_BROAD_SHARE: f32 = 0.5;
 /// finger of the tree in front of the one stroked; docs/extraction.md, "Stroke clean-up").
 const OCCLUDER_SHORT_STEP: f32 = 1.25;
 const OCCLUDER_SHORT_R: f32 = 4.0;
-/// Such a run is not cut where it goes on as the chain before it went (`goes_on_as_before`): a part
-/// receding towards the camera, crossed by a bar in front, steps from the bar back onto itself (the
-/// guitar stand's back foot behind a leg). The run keeps within `OCCLUDER_SHORT_STEP` gaps of (or
-/// behind) the line fitted to the chain's depths over the `TREND_R` radii on screen before the
-/// step, its own depth changes at least `TREND_SLOPE_SHARE` as fast the same way, and it has
-/// `TREND_MEMBERS` members or more: over fewer its slope is noise (a node's few members where a
-/// stem ends).
+/// Such a run of `TREND_MEMBERS` members or more is not cut where it is the part going on
+/// (`is_the_part_going_on`), judged on the chain over the `TREND_R` radii on screen before the step:
+/// - level with it: within `OCCLUDER_SHORT_STEP` gaps of its median depth (or of the member before
+///   the step, where that is nearer). One member before the step can be a bump behind: a sprinkle
+///   whose chain took the icing beside it for a stretch, 1 gap behind, then stepped back onto it;
+/// - or going on as it went: within `OCCLUDER_SHORT_STEP` gaps of (or behind) the line fitted to its
+///   depths, the run's own depth changing at least `TREND_SLOPE_SHARE` as fast the same way. A part
+///   receding towards the camera, crossed by a bar in front, steps from the bar back onto itself
+///   (the guitar stand's back foot behind a leg).
+///
+/// Over fewer members a run is judged on the member before the step alone: a node's few members
+/// where a stem ends are kept under one stroke and cut under the next.
 const TREND_R: f32 = 8.0;
 const TREND_SLOPE_SHARE: f32 = 0.5;
 const TREND_MEMBERS: usize = 8;
@@ -538,7 +543,7 @@ fn cut_short_front_tail(
         let before = chain[k - 1].1.depth;
         if (chain[k].1.depth - before).abs() > depth_gap
             && nearest < before - OCCLUDER_SHORT_STEP * depth_gap
-            && !goes_on_as_before(chain, arc, k, depth_gap, focal_px)
+            && !is_the_part_going_on(chain, arc, k, depth_gap, focal_px)
         {
             chain.truncate(k);
             return;
@@ -546,16 +551,23 @@ fn cut_short_front_tail(
     }
 }
 
-/// Whether the end run `chain[k..]` goes on as the chain before it went (`TREND_R`).
-fn goes_on_as_before(chain: &[(usize, Candidate)], arc: &[f32], k: usize, depth_gap: f32, focal_px: f32) -> bool {
+/// Whether the end run `chain[k..]` is the part going on (`TREND_R`): level with the chain before
+/// the step, or going on as it went.
+fn is_the_part_going_on(chain: &[(usize, Candidate)], arc: &[f32], k: usize, depth_gap: f32, focal_px: f32) -> bool {
     let run = &chain[k..];
     if run.len() < TREND_MEMBERS {
         return false;
     }
     let step = arc[chain[k - 1].0];
     let window = on_screen(TREND_R, depth_gap, focal_px, chain[k - 1].1.depth);
-    let (at, depth): (Vec<f32>, Vec<f32>) =
-        chain[..k].iter().filter(|m| (step - arc[m.0]).abs() <= window).map(|m| (arc[m.0], m.1.depth)).unzip();
+    let before: Vec<&(usize, Candidate)> = chain[..k].iter().filter(|m| (step - arc[m.0]).abs() <= window).collect();
+    let mut depths: Vec<f32> = before.iter().map(|m| m.1.depth).collect();
+    let level = median(&mut depths).min(chain[k - 1].1.depth);
+    let nearest = run.iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
+    if nearest >= level - OCCLUDER_SHORT_STEP * depth_gap {
+        return true;
+    }
+    let (at, depth): (Vec<f32>, Vec<f32>) = before.iter().map(|m| (arc[m.0], m.1.depth)).unzip();
     let Some(trend) = LineFit::of(&at, &depth) else {
         return false;
     };
@@ -1058,6 +1070,29 @@ mod tests {
         );
         assert_eq!(cut(12, &|a| 0.815 + 0.0006 * (a - 144.0)), 12, "receding the other way: cut");
         assert_eq!(cut(6, &receding), 6, "6 members: too few to tell a trend");
+    }
+
+    #[test]
+    fn a_run_stepped_in_front_of_a_bump_behind_is_kept_where_level_with_the_chain() {
+        // 60 members 3 px apart at depth 1, focal 1000 px, the gap 0.03 (R = 0.01, 10 px on screen):
+        // the `bump` members before the last `count` lie 1.2 gaps behind (the icing beside a
+        // sprinkle), and the run after them 1.2 gaps in front of the bump, 0.01 nearer than the part.
+        let arc: Vec<f32> = (0..60).map(|i| 3.0 * i as f32).collect();
+        let cut = |bump: usize, count: usize| {
+            let mut chain: Vec<_> =
+                (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect();
+            for m in &mut chain[60 - count - bump..60 - count] {
+                m.1.depth = 1.036;
+            }
+            for m in &mut chain[60 - count..] {
+                m.1.depth = 0.99;
+            }
+            cut_occluder_ends(&mut chain, &arc, 0.03, 1000.0);
+            60 - chain.len()
+        };
+        assert_eq!(cut(3, 10), 0, "level with the chain before the bump: kept");
+        assert_eq!(cut(3, 6), 6, "6 members: judged on the member before the step");
+        assert_eq!(cut(20, 10), 10, "a stretch behind as long as the window's median: cut");
     }
 
     #[test]
