@@ -543,7 +543,7 @@ fn cut_short_front_tail(
         let before = chain[k - 1].1.depth;
         if (chain[k].1.depth - before).abs() > depth_gap
             && nearest < before - OCCLUDER_SHORT_STEP * depth_gap
-            && !is_the_part_going_on(chain, arc, k, depth_gap, focal_px)
+            && !is_the_part_going_on(chain, arc, k, nearest, depth_gap, focal_px)
         {
             chain.truncate(k);
             return;
@@ -551,9 +551,16 @@ fn cut_short_front_tail(
     }
 }
 
-/// Whether the end run `chain[k..]` is the part going on (`TREND_R`): level with the chain before
-/// the step, or going on as it went.
-fn is_the_part_going_on(chain: &[(usize, Candidate)], arc: &[f32], k: usize, depth_gap: f32, focal_px: f32) -> bool {
+/// Whether the end run `chain[k..]`, whose nearest depth is `nearest`, is the part going on
+/// (`TREND_R`): level with the chain before the step, or going on as it went.
+fn is_the_part_going_on(
+    chain: &[(usize, Candidate)],
+    arc: &[f32],
+    k: usize,
+    nearest: f32,
+    depth_gap: f32,
+    focal_px: f32,
+) -> bool {
     let run = &chain[k..];
     if run.len() < TREND_MEMBERS {
         return false;
@@ -563,7 +570,6 @@ fn is_the_part_going_on(chain: &[(usize, Candidate)], arc: &[f32], k: usize, dep
     let before: Vec<&(usize, Candidate)> = chain[..k].iter().filter(|m| (step - arc[m.0]).abs() <= window).collect();
     let mut depths: Vec<f32> = before.iter().map(|m| m.1.depth).collect();
     let level = median(&mut depths).min(chain[k - 1].1.depth);
-    let nearest = run.iter().map(|m| m.1.depth).fold(f32::INFINITY, f32::min);
     if nearest >= level - OCCLUDER_SHORT_STEP * depth_gap {
         return true;
     }
