@@ -52,7 +52,7 @@ def test_case(case: dict) -> None:
 
 def test_log_excess_sums_how_far_each_missed_distance_is_from_its_target() -> None:
     """The number changes to extraction are compared by: only the issue's missed distances count,
-    each as ln(measured / target); the radius targets and our folding back do not; an unmeasurable
+    each as ln(measured / target); the radius targets, our folding back and the stroke's share do not; an unmeasurable
     distance is infinitely far."""
     from sketchrodgs.realcases import CaseScore
 
@@ -72,8 +72,9 @@ def test_log_excess_sums_how_far_each_missed_distance_is_from_its_target() -> No
         jaccard=0.9,
         end_gap=1.0,
         fold_back=5.0,
+        stroke_share=0.3,
     )
     assert score.log_excess() == pytest.approx(np.log(3.0 / 1.5))
-    assert len(score.misses()) == 4  # jitter max, folding back, the radius range and spread
+    assert len(score.misses()) == 5  # jitter max, folding back, the stroke's share, the radius range and spread
     score.cross_max = np.inf
     assert score.log_excess() == np.inf
