@@ -19,7 +19,6 @@ from sketchrodgs import Camera, PathNotFoundError, realcases
 from sketchrodgs.consistency import polyline_agreement
 from sketchrodgs.extract import extract_rod
 from sketchrodgs.render import SOLID_OUTPUTS, render
-from sketchrodgs.viewer.camera import unproject
 
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "real_cases"
 
@@ -27,7 +26,7 @@ DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "real_cases"
 def zoomed(camera: Camera, stroke: np.ndarray, depth: float, fraction: float) -> tuple[Camera, np.ndarray]:
     """`camera` moved towards the stroke's middle (at `depth`) to `fraction` of the distance, and the
     stroke as it then sees the same points."""
-    points = unproject(stroke, camera, depth)
+    points = camera.unproject(stroke, depth)
     moved = camera.camera_to_world.copy()
     moved[:3, 3] += (1 - fraction) * (points[len(points) // 2] - moved[:3, 3])
     near = min(camera.near, 0.5 * fraction * depth)

@@ -55,12 +55,10 @@ def close_up(
     """A camera `distance` from what `far` sees at camera depth `depth` on its axis, looking as `far`
     does, and `stroke` (drawn in `far`) as 3D points at that depth. `look_at` goes to
     `Camera.look_at` (width, height, fov_y_deg, near)."""
-    from sketchrodgs.viewer.camera import unproject
-
     forward = far.camera_to_world[:3, 2]
     target = far.center + depth * forward
     camera = Camera.look_at(target - distance * forward, target, up=-far.camera_to_world[:3, 1], **look_at)
-    return camera, unproject(stroke, far, depth)
+    return camera, far.unproject(stroke, depth)
 
 
 def sprinkle_close_up(distance: float, **look_at: object) -> tuple[Camera, np.ndarray]:

@@ -52,8 +52,8 @@ def test_case(case: dict) -> None:
 
 def test_log_excess_sums_how_far_each_missed_distance_is_from_its_target() -> None:
     """The number changes to extraction are compared by: only the issue's missed distances count,
-    each as ln(measured / target); the radius targets, our folding back and the stroke's share do not; an unmeasurable
-    distance is infinitely far."""
+    each as ln(measured / target); the radius targets, our folding back and the stroke's share do
+    not; an unmeasurable distance is infinitely far."""
     from sketchrodgs.realcases import CaseScore
 
     met = dict(cross_mean=0.1, cross_max=0.5, cross_mean_estimated=0.1, cross_max_estimated=0.5, reverse_max=0.0)
@@ -75,6 +75,7 @@ def test_log_excess_sums_how_far_each_missed_distance_is_from_its_target() -> No
         stroke_share=0.3,
     )
     assert score.log_excess() == pytest.approx(np.log(3.0 / 1.5))
-    assert len(score.misses()) == 5  # jitter max, folding back, the stroke's share, the radius range and spread
+    # jitter max, folding back, the stroke's share, the radius range and spread
+    assert len(score.misses()) == 5
     score.cross_max = np.inf
     assert score.log_excess() == np.inf

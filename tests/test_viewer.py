@@ -30,7 +30,6 @@ from sketchrodgs.viewer.camera import (
     pixels_to_screen,
     quat_to_matrix,
     screen_to_pixels,
-    unproject,
     viser_view,
 )
 from sketchrodgs.viewer.display import SceneDisplay, handle_radii, towards_camera
@@ -127,7 +126,7 @@ def test_screen_pixels_and_unproject_round_trip():
     screen = np.random.default_rng(0).uniform(0, 1, (20, 2))
     np.testing.assert_allclose(pixels_to_screen(screen_to_pixels(screen, camera), camera), screen, atol=1e-6)
     pixels = screen_to_pixels(screen, camera)
-    uv, depth = camera.project(unproject(pixels, camera, 3.0))
+    uv, depth = camera.project(camera.unproject(pixels, 3.0))
     np.testing.assert_allclose(uv, pixels, atol=1e-3)
     np.testing.assert_allclose(depth, 3.0)
 

@@ -142,6 +142,15 @@ class Camera:
             uv = np.stack([self.fx * cam[:, 0] / safe + self.cx, self.fy * cam[:, 1] / safe + self.cy], axis=1)
         return uv, depth
 
+    def unproject(self, pixels: npt.ArrayLike, depth: float | npt.ArrayLike) -> np.ndarray:
+        """The inverse of `project`: (S, 2) continuous pixel coordinates at camera depth `depth` (z,
+        not distance; one for all or one per point) -> (S, 3) float64 world points."""
+        px = np.asarray(pixels, np.float64).reshape(-1, 2)
+        z = np.asarray(depth, np.float64).reshape(-1, 1)
+        local = np.stack([(px[:, 0] - self.cx) / self.fx, (px[:, 1] - self.cy) / self.fy, np.ones(len(px))], axis=1)
+        to_world = self.camera_to_world
+        return (z * local) @ to_world[:3, :3].T + to_world[:3, 3]
+
     def screen_offset(self, point: npt.ArrayLike, pixels: Sequence[float]) -> np.ndarray:
         """(3,) the world displacement, parallel to the image plane, that moves `point` by
         `pixels` (du, dv; v down) in the image: pixels at the point's depth."""

@@ -474,13 +474,7 @@ def _line_over_path_pixels(
     pixels, ids = pixels[shown], ids[shown]
     if len(pixels) < 2:
         return points
-    depth = camera.project(np.take(scene.means, ids, axis=0))[1]
-    rays = np.stack(
-        [(pixels[:, 0] + 0.5 - camera.cx) / camera.fx, (pixels[:, 1] + 0.5 - camera.cy) / camera.fy, np.ones(len(ids))],
-        axis=1,
-    )
-    to_world = camera.camera_to_world
-    unprojected = (rays * depth[:, None]) @ to_world[:3, :3].T + to_world[:3, 3]
+    unprojected = camera.unproject(pixels + 0.5, camera.project(np.take(scene.means, ids, axis=0))[1])
     middle = unprojected.mean(axis=0)
     direction = np.linalg.svd(unprojected - middle, full_matrices=False)[2][0]
     if direction @ (points[-1] - points[0]) < 0:

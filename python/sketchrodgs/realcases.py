@@ -245,9 +245,8 @@ def end_gap(extraction: Extraction) -> float:
 
 def stroke_share(extraction: Extraction) -> float:
     """The rod's length on screen over its stroke's (the stroke as the user drew it)."""
-    uv, _ = extraction.camera.project(np.asarray(extraction.polyline, np.float64))
     drawn = pl.polyline_length(np.asarray(extraction.stroke, np.float64))
-    return pl.polyline_length(uv) / drawn if drawn > 0 else np.nan
+    return pl.polyline_length(_on_screen(extraction)[0]) / drawn if drawn > 0 else np.nan
 
 
 def fold_back(extraction: Extraction) -> float:

@@ -121,14 +121,6 @@ def pixels_to_screen(pixels: np.ndarray, camera: Camera) -> np.ndarray:
     return np.asarray(pixels, np.float64).reshape(-1, 2) / [camera.width, camera.height]
 
 
-def unproject(pixels: np.ndarray, camera: Camera, depth: float) -> np.ndarray:
-    """(S, 2) pixel points -> (S, 3) float64 world points at camera depth `depth` (z, not distance)."""
-    px = np.asarray(pixels, np.float64).reshape(-1, 2)
-    local = np.stack([(px[:, 0] - camera.cx) / camera.fx, (px[:, 1] - camera.cy) / camera.fy, np.ones(len(px))], axis=1)
-    c2w = camera.camera_to_world
-    return (depth * local) @ c2w[:3, :3].T + c2w[:3, 3]
-
-
 FRAME_MARGIN = 1.4  # the framed sphere's radius, times this, fills the narrower field of view
 
 

@@ -17,7 +17,7 @@ from ..camera import Camera
 from ..errors import SketchRodGSError
 from ..extract import Extraction, extract_rod
 from ..scene import GaussianScene
-from .camera import screen_to_pixels, unproject
+from .camera import screen_to_pixels
 
 # The path search looks this share of the image width either side of the stroke, or 1.25 R where
 # that is wider (`extract_rod`'s band_px default).
@@ -69,7 +69,7 @@ class Stroke:
 
     def world_points(self, depth: float) -> np.ndarray:
         """(S, 3) the stroke placed at camera depth `depth` (to draw it in the scene)."""
-        return unproject(self.pixels(), self.camera, depth)
+        return self.camera.unproject(self.pixels(), depth)
 
     def brush(self, depth: float) -> np.ndarray:
         """(K, 2, 3) line segments at camera depth `depth` outlining the band the path search looks
@@ -89,7 +89,7 @@ class Stroke:
         if not segments:
             return np.empty((0, 2, 3), np.float32)
         flat = np.concatenate(segments).reshape(-1, 2)
-        return unproject(flat, self.camera, depth).reshape(-1, 2, 3).astype(np.float32)
+        return self.camera.unproject(flat, depth).reshape(-1, 2, 3).astype(np.float32)
 
 
 def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> Extraction:
