@@ -42,7 +42,16 @@ def calls(rng: np.random.Generator) -> list[tuple]:
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(axis, axis=0), axis=1))])
     return [
         (_core.nearest_on_polyline, polyline, points, float(rng.choice([0.1, 1.0, np.nan, 1e30, 0.0, -1.0]))),
-        (_core.cross_section_centroids, axis, tangents, points, rng.integers(-2, m + 3, n).astype(np.int32), 0.1, 1.0),
+        (
+            _core.cross_section_centroids,
+            axis,
+            tangents,
+            points,
+            rng.integers(-2, m + 3, n).astype(np.int32),
+            0.1,
+            0.3,
+            1.0,
+        ),
         (_core.rows_in_box, points, tuple(rng.normal(size=3)), tuple(rng.normal(size=3))),
         (_core.median_neighbour_distance, points, int(rng.integers(0, 6)), int(rng.integers(0, 600))),
         (_core.bumps, axis, 0.01, 3.0, 1.0, 30.0, 2.0, 4.0),

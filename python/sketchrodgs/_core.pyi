@@ -120,6 +120,7 @@ def cross_section_centroids(
     points: npt.NDArray[np.float32],
     nearest_vertex: npt.NDArray[np.int32],
     half_width: float,
+    wide_half_width: float,
     reach: float,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint32]]: ...
 def max_alpha(

@@ -85,7 +85,8 @@ def recentre(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarr
 
     Each point becomes the centroid of its cross-section: the Gaussians within R/2 of its plane
     across the local tangent and within 2.2 R of it; then twice more within 1.5 R of the moved
-    points. Points with no Gaussians around stay where they are.
+    points. A cross-section of one Gaussian or none (a part of few, such as a sprinkle) is taken
+    within R of the plane instead; points with no Gaussians around even then stay where they are.
 
     Args:
         points: (M, 3) polyline on the visible surface, in order, about R/2 apart.
@@ -107,7 +108,7 @@ def recentre(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarr
         # surface points are noisy: take tangents over +-2 R of the smoothed line
         spacing = max(polyline_length(axis) / (len(axis) - 1), 1e-12)
         tangent = tangents(laplacian_smooth(axis, 5), reach=max(1, int(round(2 * radius / spacing))))
-        axis, _ = _core.cross_section_centroids(axis, tangent, members, nearest, radius / 2, reach * radius)
+        axis, _ = _core.cross_section_centroids(axis, tangent, members, nearest, radius / 2, radius, reach * radius)
     return _straighten_ends(axis, np.asarray(points, np.float64), radius)
 
 

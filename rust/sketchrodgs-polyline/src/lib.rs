@@ -320,32 +320,77 @@ pub fn nearest_on_polyline(
         .collect())
 }
 
+/// A cross-section of fewer points than this is at most one point's centre: on a part of few
+/// Gaussians (a sprinkle, about two per radius) a Gaussian on the part's surface, anywhere across
+/// it, and the axis hooked towards it at an end (docs/extraction.md, "A cross-section of one
+/// Gaussian").
+const LEAST_MEMBERS: u32 = 2;
+
 /// Centroid of each polyline vertex's cross-section: the points within `half_width` of the plane
 /// through vertex `i` across `tangents[i]` and within `reach` of the vertex. A point is tried
 /// against its `nearest_vertex` and that vertex's two neighbours only (-1: no nearest vertex).
-/// Vertices with an empty cross-section keep their position. Returns the centroids and counts.
+/// A cross-section of fewer than `LEAST_MEMBERS` points is taken again within `wide_half_width` of
+/// the plane, from the points whose nearest vertex lies within `2 reach` along the axis. A vertex
+/// whose cross-section is empty even then keeps its position. Returns the centroids and the number
+/// of points each was taken over.
 pub fn cross_section_centroids(
     axis: &[[f64; 3]],
     tangents: &[[f64; 3]],
     points: &[[f32; 3]],
     nearest_vertex: &[i32],
     half_width: f64,
+    wide_half_width: f64,
     reach: f64,
 ) -> (Vec<[f64; 3]>, Vec<u32>) {
     let mut sums = vec![[0.0_f64; 3]; axis.len()];
     let mut counts = vec![0_u32; axis.len()];
+    // whether `p` lies in vertex `i`'s cross-section of half width `half`
+    let inside = |i: usize, p: [f64; 3], half: f64| {
+        let (Some(a), Some(t)) = (axis.get(i), tangents.get(i)) else { return false };
+        let d = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+        let along = d[0] * t[0] + d[1] * t[1] + d[2] * t[2];
+        along.abs() <= half && d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= reach * reach
+    };
     for (p, &n) in points.iter().zip(nearest_vertex) {
         let Ok(n) = usize::try_from(n) else { continue };
         let p = p.map(f64::from);
         for i in n.saturating_sub(1)..=(n + 1).min(axis.len().saturating_sub(1)) {
-            let (Some(a), Some(t)) = (axis.get(i), tangents.get(i)) else { continue };
-            let d = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
-            let along = d[0] * t[0] + d[1] * t[1] + d[2] * t[2];
-            if along.abs() <= half_width && d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= reach * reach {
+            if inside(i, p, half_width) {
                 for k in 0..3 {
                     sums[i][k] += p[k];
                 }
                 counts[i] += 1;
+            }
+        }
+    }
+    let sparse: Vec<usize> = (0..axis.len()).filter(|&i| counts[i] < LEAST_MEMBERS).collect();
+    if !sparse.is_empty() && wide_half_width > half_width {
+        let mut by_vertex: Vec<Vec<usize>> = vec![Vec::new(); axis.len()];
+        for (k, &n) in nearest_vertex.iter().enumerate().take(points.len()) {
+            if let Some(members) = usize::try_from(n).ok().and_then(|n| by_vertex.get_mut(n)) {
+                members.push(k);
+            }
+        }
+        let mut arc = vec![0.0_f64; axis.len()];
+        for i in 1..axis.len() {
+            let (a, b) = (axis[i - 1], axis[i]);
+            arc[i] = arc[i - 1] + ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
+        }
+        for i in sparse {
+            let near = |j: &usize| (arc[*j] - arc[i]).abs() <= 2.0 * reach;
+            let (mut sum, mut count) = ([0.0_f64; 3], 0_u32);
+            for j in (0..axis.len()).filter(near) {
+                for p in by_vertex[j].iter().map(|&k| points[k].map(f64::from)) {
+                    if inside(i, p, wide_half_width) {
+                        for k in 0..3 {
+                            sum[k] += p[k];
+                        }
+                        count += 1;
+                    }
+                }
+            }
+            if count > counts[i] {
+                (sums[i], counts[i]) = (sum, count);
             }
         }
     }
@@ -483,15 +528,39 @@ mod tests {
                 nearest.push(i);
             }
         }
-        let (centroids, counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.25, 2.2);
+        let (centroids, counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.25, 0.25, 2.2);
         for (c, n) in centroids.iter().zip(&counts) {
             assert_eq!(*n, 8); // half width 0.25 < spacing 0.5: only its own ring
             assert!(c[1].abs() < 1e-6 && c[2].abs() < 1e-6, "{c:?}");
         }
         // a vertex with nothing around keeps its place; points without a nearest vertex are skipped
         let (centroids, counts) =
-            cross_section_centroids(&axis[..2], &tangents[..2], &[[9.0, 9.0, 9.0]], &[-1], 0.25, 2.2);
+            cross_section_centroids(&axis[..2], &tangents[..2], &[[9.0, 9.0, 9.0]], &[-1], 0.25, 1.0, 2.2);
         assert_eq!((centroids[0], counts[0]), (axis[0], 0));
+    }
+
+    #[test]
+    fn a_cross_section_of_one_point_is_taken_over_the_wider_slab() {
+        // a part of few Gaussians: an axis along x, points 0.5 apart; one Gaussian on each side in
+        // turn, about one per radius (1)
+        let axis: Vec<[f64; 3]> = (0..11).map(|i| [i as f64 * 0.5, 0.0, 0.0]).collect();
+        let tangents = vec![[1.0, 0.0, 0.0]; 11];
+        let points = [[1.2, -1.0, 0.0], [2.0, 1.0, 0.0], [2.8, -1.0, 0.0]];
+        let nearest = [2, 4, 6];
+        let (narrow, narrow_counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.5, 0.5, 2.2);
+        let (centroids, counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.5, 1.0, 2.2);
+        // at x = 2 the slab of half width 0.5 holds one Gaussian, and the axis went to its side
+        assert_eq!((narrow[4], narrow_counts[4]), ([2.0, 1.0, 0.0], 1));
+        // within 1 of the plane it holds all three
+        assert_eq!(counts[4], 3);
+        assert!((centroids[4][0] - 2.0).abs() < 1e-6 && (centroids[4][1] + 1.0 / 3.0).abs() < 1e-6);
+        // a cross-section of two is kept as it was, and an empty one keeps its vertex
+        assert_eq!((centroids[3], counts[3]), (narrow[3], 2));
+        assert!((centroids[3][0] - 1.6).abs() < 1e-6 && centroids[3][1].abs() < 1e-6);
+        assert_eq!((centroids[10], counts[10]), (axis[10], 0));
+        // nearest vertices past the axis, or more of them than points, are skipped
+        let (_, counts) = cross_section_centroids(&axis, &tangents, &points[..1], &[2, 40, -1], 0.5, 1.0, 2.2);
+        assert_eq!(counts[2], 1);
     }
 
     #[test]

@@ -60,8 +60,10 @@ type Centroids<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u32>>);
 
 /// Centroids of the cross-sections of `axis` (M, 3) float64 with unit `tangents` (M, 3) float64,
 /// from `points` (N, 3) float32 tried against their `nearest_vertex` (N,) int32 (-1: none) and its
-/// neighbours. Returns (centroids (M, 3) float64, counts (M,) uint32).
+/// neighbours; a cross-section of fewer than two points is taken again within `wide_half_width`.
+/// Returns (centroids (M, 3) float64, counts (M,) uint32).
 #[pyfunction]
+#[allow(clippy::too_many_arguments)]
 fn cross_section_centroids<'py>(
     py: Python<'py>,
     axis: &Bound<'py, PyArray2<f64>>,
@@ -69,6 +71,7 @@ fn cross_section_centroids<'py>(
     points: &Bound<'py, PyArray2<f32>>,
     nearest_vertex: &Bound<'py, PyArray1<i32>>,
     half_width: f64,
+    wide_half_width: f64,
     reach: f64,
 ) -> PyResult<Centroids<'py>> {
     let (axis, tangents) = (axis.try_readonly()?, tangents.try_readonly()?);
@@ -83,7 +86,15 @@ fn cross_section_centroids<'py>(
     let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
     let nearest = contiguous(&nearest, "nearest_vertex")?;
     let (centroids, counts) = run_parallel(py, "cross_section_centroids", || {
-        sketchrodgs_polyline::cross_section_centroids(axis, tangents, points, nearest, half_width, reach)
+        sketchrodgs_polyline::cross_section_centroids(
+            axis,
+            tangents,
+            points,
+            nearest,
+            half_width,
+            wide_half_width,
+            reach,
+        )
     })?;
     let centroids = numpy::ndarray::Array2::from_shape_vec((m, 3), centroids.into_iter().flatten().collect())
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
