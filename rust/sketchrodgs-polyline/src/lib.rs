@@ -377,10 +377,12 @@ pub fn cross_section_centroids(
             arc[i] = arc[i - 1] + ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
         }
         for i in sparse {
-            let near = |j: &usize| (arc[*j] - arc[i]).abs() <= 2.0 * reach;
+            // the vertices within 2 reaches along the axis (the arc only grows)
+            let from = arc.partition_point(|&s| s < arc[i] - 2.0 * reach);
+            let to = arc.partition_point(|&s| s <= arc[i] + 2.0 * reach).max(from);
             let (mut sum, mut count) = ([0.0_f64; 3], 0_u32);
-            for j in (0..axis.len()).filter(near) {
-                for p in by_vertex[j].iter().map(|&k| points[k].map(f64::from)) {
+            for members in &by_vertex[from..to] {
+                for p in members.iter().map(|&k| points[k].map(f64::from)) {
                     if inside(i, p, wide_half_width) {
                         for k in 0..3 {
                             sum[k] += p[k];
