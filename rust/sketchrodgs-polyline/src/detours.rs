@@ -171,7 +171,7 @@ pub fn bumps(points: &[[f64; 3]], radius: f64, limits: BumpLimits) -> Vec<(usize
 }
 
 /// The arc length at each point, in radii (0 at the first).
-fn arc_in_radii(points: &[[f64; 3]], radius: f64) -> Vec<f64> {
+pub(crate) fn arc_in_radii(points: &[[f64; 3]], radius: f64) -> Vec<f64> {
     let mut arc = vec![0.0; points.len()];
     for k in 1..points.len() {
         arc[k] = arc[k - 1] + distance(&points[k - 1], &points[k]) / radius;

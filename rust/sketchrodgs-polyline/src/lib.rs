@@ -371,11 +371,7 @@ pub fn cross_section_centroids(
                 members.push(k);
             }
         }
-        let mut arc = vec![0.0_f64; axis.len()];
-        for i in 1..axis.len() {
-            let (a, b) = (axis[i - 1], axis[i]);
-            arc[i] = arc[i - 1] + ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
-        }
+        let arc = detours::arc_in_radii(axis, 1.0);
         for i in sparse {
             // the vertices within 2 reaches along the axis (the arc only grows)
             let from = arc.partition_point(|&s| s < arc[i] - 2.0 * reach);
