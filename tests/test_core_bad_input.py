@@ -52,6 +52,7 @@ def calls(rng: np.random.Generator) -> list[tuple]:
             0.3,
             1.0,
         ),
+        (_core.crowding, axis, tangents, points, 0.5, 1.25, float(rng.choice([2.5, np.nan, -1.0]))),
         (_core.rows_in_box, points, tuple(rng.normal(size=3)), tuple(rng.normal(size=3))),
         (_core.median_neighbour_distance, points, int(rng.integers(0, 6)), int(rng.integers(0, 600))),
         (_core.bumps, axis, 0.01, 3.0, 1.0, 30.0, 2.0, 4.0),

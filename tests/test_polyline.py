@@ -201,3 +201,36 @@ def test_a_bump_out_and_back_into_line_is_bridged_and_a_bend_or_a_wave_is_kept()
     wave = np.stack([x, 2 * R * np.sin(x / R * 2 * np.pi / 16), 0 * x], axis=1)
     for kept in (bend, wave):
         np.testing.assert_array_equal(pl.bridge_detours(kept, R, *_seen_from(kept)), kept)
+
+
+def rings(x: np.ndarray, radius: float, count: int) -> np.ndarray:
+    """`count` points on a circle of `radius` around the x axis at each of `x`, float32."""
+    angle = np.arange(count) * 2 * np.pi / count
+    return np.array([[xi, radius * np.cos(a), radius * np.sin(a)] for xi in x for a in angle], np.float32)
+
+
+def test_an_end_that_turns_off_among_what_the_part_meets_is_cut_where_it_leaves_the_line():
+    # a part 30 R long along x (its surface: rings of radius R every R/4); over its last 8 R what it
+    # meets lies around it (rings 1.8 R off the axis: a node's leaves, a limb it joins)
+    x = np.arange(0, 30 * R, R / 2)
+    surface = rings(np.arange(0, 30 * R, R / 4), R, 12)
+    around = np.concatenate([surface, rings(np.arange(22 * R, 30 * R, R / 4), 1.8 * R, 24)])
+    straight = np.stack([x, 0 * x, 0 * x], axis=1)
+    # its axis turns off over the last 3 R (onto a stalk the stroke's end led to)
+    turned = straight.copy()
+    turned[:, 1] = 0.6 * np.maximum(x - 27 * R, 0)
+    cut = pl.cut_junction_ends(turned, around, R)
+    assert np.abs(cut[:, 1]).max() <= 0.75 * R and cut[-1, 0] >= 27 * R, cut[-1] / R
+    np.testing.assert_array_equal(cut, turned[: len(cut)])  # what is kept stays where it was
+    np.testing.assert_array_equal(pl.cut_junction_ends(turned[::-1], around, R), cut[::-1])  # either end
+    # kept: the same end where nothing lies around the part, or only over its last 3 R (a bud
+    # beside it, not a junction), a straight end among what it meets, and a bend 8 R from the end
+    # (the part's own: over 5 R deep)
+    bud = np.concatenate([surface, rings(np.arange(27 * R, 30 * R, R / 4), 1.8 * R, 24)])
+    bent = straight.copy()
+    bent[:, 1] = 0.3 * np.maximum(x - 22 * R, 0)
+    for points, centres in ((turned, surface), (turned, bud), (straight, around), (bent, around)):
+        np.testing.assert_array_equal(pl.cut_junction_ends(points, centres, R), points)
+    # a part crowded all along (a sprinkle on its icing) has no line to judge its end by
+    crowded = np.concatenate([surface, rings(np.arange(0, 30 * R, R / 4), 1.8 * R, 24)])
+    np.testing.assert_array_equal(pl.cut_junction_ends(turned[-20:], crowded, R), turned[-20:])

@@ -123,6 +123,14 @@ def cross_section_centroids(
     wide_half_width: float,
     reach: float,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint32]]: ...
+def crowding(
+    axis: npt.NDArray[np.float64],
+    tangents: npt.NDArray[np.float64],
+    points: npt.NDArray[np.float32],
+    half_width: float,
+    inner: float,
+    outer: float,
+) -> npt.NDArray[np.float64]: ...
 def max_alpha(
     means: npt.NDArray[np.float32],
     scales: npt.NDArray[np.float32],

@@ -417,8 +417,8 @@ def _extract(
             pixel_path,
             pieces,
         )
-    # Recentre on a uniform sampling at half the radius, smooth, bridge detours, cut hooked ends,
-    # resample to the edge length.
+    # Recentre on a uniform sampling at half the radius, smooth, bridge detours, cut hooked ends
+    # and ends turning off at a junction, resample to the edge length.
     _check_vertex_count("radius", pl.polyline_length(points), radius / 2, radius, 4 * MAX_ROD_VERTICES)
     points = pl.resample(points, radius / 2)
     if recentre:
@@ -429,6 +429,8 @@ def _extract(
     points = pl.smooth_axis(points, radius, smoothing)
     points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2])
     points = pl.cut_hooked_ends(points, radius)
+    if recentre:
+        points = pl.cut_junction_ends(points, nearby, radius)
     length = pl.polyline_length(points)
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
     _check_vertex_count("edge_length", length, spacing, spacing, MAX_ROD_VERTICES)

@@ -67,6 +67,21 @@ _BUMP_OFF = 1.5
 _BUMP_ANGLE = 15.0
 _BUMP_LEAD = 3.0
 _BUMP_END = 3.0
+# cut_junction_ends: over the first `_JUNCTION_REGION` radii of each end, how crowded each cross-section
+# `2 * _JUNCTION_SLAB` R thick is (`_core.crowding`: the Gaussians `_JUNCTION_INNER` to `_JUNCTION_OUTER` R
+# off the axis over those within `_JUNCTION_INNER` R; averaged with its two neighbours); an end run
+# crowded over `_JUNCTION_CROWDED`, at least `_JUNCTION_LEAST` R long, is judged against the line of the
+# `_JUNCTION_BODY` R of axis inside it, and cut from where it strays over `_JUNCTION_OFF` R from that
+# line, unless that lies over `_JUNCTION_DEEPEST` R from the end
+_JUNCTION_REGION = 16.0
+_JUNCTION_SLAB = 0.5
+_JUNCTION_INNER = 1.25
+_JUNCTION_OUTER = 2.5
+_JUNCTION_CROWDED = 0.5
+_JUNCTION_LEAST = 4.0
+_JUNCTION_BODY = 6.0
+_JUNCTION_OFF = 0.75
+_JUNCTION_DEEPEST = 5.0
 
 
 def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
@@ -201,6 +216,76 @@ def cut_hooked_ends(points: np.ndarray, radius: float) -> np.ndarray:
         if len(points) == count:
             break
     return points
+
+
+def cut_junction_ends(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
+    """Cut the ends that turn off the part where it meets something (docs/extraction.md, "Ends at a
+    junction"). Where a part ends at a node, a fork or a thicker part it joins, what it meets lies
+    around its last cross-sections (they are crowded: `_core.crowding`), and the path and the axis
+    follow whichever stalk or side the stroke's last pixels lead to. Such an end run is cut where the
+    axis strays from the line of the part before it; a part that runs on straight through a crowded
+    end keeps it. Within a crowded run the end's course says nothing about the part.
+
+    Args:
+        points: (M, 3) axis points in order, about R/2 apart.
+        centres: (N, 3) float32 Gaussian centres around the part (those the recentring read).
+        radius: R, the object's radius.
+
+    Returns:
+        (K, 3) float64, the points kept (K <= M); all of them where less than 2 R would be left.
+    """
+    points = np.asarray(points, np.float64)
+    keep = [0, len(points)]
+    for end in (0, 1):
+        cut = _junction_cut(points if end == 0 else points[::-1], centres, radius)
+        keep[end] = cut if end == 0 else len(points) - cut
+    kept = points[keep[0] : keep[1]]
+    return kept if len(kept) > 1 and polyline_length(kept) >= 2 * radius else points
+
+
+def _junction_cut(q: np.ndarray, centres: np.ndarray, radius: float) -> int:
+    """How many points of `q`'s start `cut_junction_ends` cuts (0: none)."""
+    arc = arc_lengths(q)
+    region = q[: int(np.searchsorted(arc, _JUNCTION_REGION * radius, side="right"))]
+    if len(region) < 4:
+        return 0
+    spacing = max(polyline_length(region) / (len(region) - 1), 1e-12)
+    tangent = tangents(region, reach=max(1, int(round(2 * radius / spacing))))
+
+    def crowding(count: int) -> np.ndarray:
+        rows = near_box(region[:count], centres, (_JUNCTION_OUTER + 0.1) * radius)
+        return _core.crowding(
+            np.ascontiguousarray(region[:count]),
+            np.ascontiguousarray(tangent[:count]),
+            np.ascontiguousarray(np.take(centres, rows, axis=0), np.float32),
+            _JUNCTION_SLAB * radius,
+            _JUNCTION_INNER * radius,
+            _JUNCTION_OUTER * radius,
+        )
+
+    # each averaged with its neighbours; past the end, as with none around (so the last two must be
+    # clearly crowded: with the end's own value repeated past it, the guitar's front foot's rod ended
+    # 6 R short of its path at the leg it meets). Most ends are free: their last two tell at once.
+    if crowding(2).sum() / 3 < _JUNCTION_CROWDED:
+        return 0
+    crowded = np.convolve(crowding(len(region)), np.ones(3) / 3, mode="same") >= _JUNCTION_CROWDED
+    # the end run of crowded cross-sections, which must end before the region does (a part crowded
+    # all along, a sprinkle on its icing, has no line of its own to judge its end by)
+    run = int(np.argmin(crowded))
+    if not crowded[0] or crowded.all() or arc[run] < _JUNCTION_LEAST * radius:
+        return 0
+    inner = int(np.searchsorted(arc, arc[run] + _JUNCTION_BODY * radius))
+    if inner >= len(q):
+        return 0
+    direction = q[run] - q[inner]
+    direction /= max(float(np.linalg.norm(direction)), 1e-30)
+    offset = q[: run + 1] - q[run]
+    off = np.linalg.norm(offset - (offset @ direction)[:, None] * direction, axis=1)
+    stray = np.flatnonzero(off > _JUNCTION_OFF * radius)
+    if len(stray) == 0:
+        return 0
+    cut = int(stray[-1]) + 1  # the innermost point that strays goes, and all outward of it
+    return cut if arc[cut] <= _JUNCTION_DEEPEST * radius else 0
 
 
 def _uncornered(points: np.ndarray, radius: float) -> np.ndarray:

@@ -400,10 +400,69 @@ pub fn cross_section_centroids(
     (centroids, counts)
 }
 
+/// How crowded the axis is at each vertex: of the `points` within `half_width` of the plane
+/// through vertex `i` across `tangents[i]`, those `inner` to `outer` from the axis line over those
+/// within `inner` (divided by 1 where none is). A free stem's cross-section holds its own Gaussians
+/// only (0 to 0.1); at a node, a fork or where a thicker part is joined, what the part meets lies
+/// around it (0.5 to 1.5; docs/extraction.md, "Ends at a junction"). Every point is tried against
+/// every vertex: the caller passes the few vertices of an end and the points near them.
+pub fn crowding(
+    axis: &[[f64; 3]],
+    tangents: &[[f64; 3]],
+    points: &[[f32; 3]],
+    half_width: f64,
+    inner: f64,
+    outer: f64,
+) -> Vec<f64> {
+    axis.par_iter()
+        .zip(tangents)
+        .map(|(a, t)| {
+            let (mut near, mut around) = (0_u32, 0_u32);
+            for p in points {
+                let d = [f64::from(p[0]) - a[0], f64::from(p[1]) - a[1], f64::from(p[2]) - a[2]];
+                let along = d[0] * t[0] + d[1] * t[1] + d[2] * t[2];
+                if along.abs() > half_width {
+                    continue;
+                }
+                let lateral2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] - along * along;
+                if lateral2 <= inner * inner {
+                    near += 1;
+                } else if lateral2 <= outer * outer {
+                    around += 1;
+                }
+            }
+            f64::from(around) / f64::from(near.max(1))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn a_cross_section_beside_another_part_counts_it_and_a_free_one_is_empty() {
+        // a tube of radius 1 along x (points on rings every 0.25), and beside its second half a
+        // second tube 2 off the axis
+        let ring = |x: f64, centre: [f64; 2]| {
+            (0..12).map(move |k| {
+                let angle = f64::from(k) * std::f64::consts::TAU / 12.0;
+                [x as f32, (centre[0] + angle.cos()) as f32, (centre[1] + angle.sin()) as f32]
+            })
+        };
+        let mut points: Vec<[f32; 3]> = (0..80).flat_map(|i| ring(f64::from(i) * 0.25, [0.0, 0.0])).collect();
+        points.extend((40..80).flat_map(|i| ring(f64::from(i) * 0.25, [2.0, 0.0])));
+        let axis = [[5.0, 0.0, 0.0], [15.0, 0.0, 0.0]];
+        let tangents = [[1.0, 0.0, 0.0]; 2];
+        let crowding = super::crowding(&axis, &tangents, &points, 0.5, 1.25, 2.5);
+        // free: every ring point lies 1 off the axis. Beside the other tube, 5 rings of each
+        // within the slab: the own tube's 12 points and 3 of the other's within 1.25, 4 of the
+        // other's 1.25 to 2.5 off (the rest of it farther)
+        assert_eq!(crowding[0], 0.0);
+        assert!((crowding[1] - 20.0 / 75.0).abs() < 1e-12, "{crowding:?}");
+        assert!(super::crowding(&axis, &tangents, &[], 0.5, 1.25, 2.5).iter().all(|&c| c == 0.0));
+    }
 
     #[test]
     fn rows_in_box_are_those_inside_in_order() {

@@ -1,4 +1,5 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
+//! `_core.crowding(...)`,
 //! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`, `_core.continuation(...)`,
 //! `_core.detours(...)`, `_core.median_neighbour_distance(...)`.
 
@@ -99,6 +100,33 @@ fn cross_section_centroids<'py>(
     let centroids = numpy::ndarray::Array2::from_shape_vec((m, 3), centroids.into_iter().flatten().collect())
         .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
     Ok((centroids.into_pyarray(py), counts.into_pyarray(py)))
+}
+
+/// How crowded the cross-section of each vertex of `axis` (M, 3) float64 with unit `tangents`
+/// (M, 3) float64 is (`sketchrodgs_polyline::crowding`): of `points` (N, 3) float32 within
+/// `half_width` of its plane, those `inner` to `outer` off the axis over those within `inner`.
+/// Returns (M,) float64.
+#[pyfunction]
+fn crowding<'py>(
+    py: Python<'py>,
+    axis: &Bound<'py, PyArray2<f64>>,
+    tangents: &Bound<'py, PyArray2<f64>>,
+    points: &Bound<'py, PyArray2<f32>>,
+    half_width: f64,
+    inner: f64,
+    outer: f64,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (axis, tangents, points) = (axis.try_readonly()?, tangents.try_readonly()?, points.try_readonly()?);
+    check_shape("axis", axis.shape(), &[None, Some(3)])?;
+    check_shape("tangents", tangents.shape(), &[Some(axis.shape()[0]), Some(3)])?;
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let axis: &[[f64; 3]] = contiguous(&axis, "axis")?.as_chunks::<3>().0;
+    let tangents: &[[f64; 3]] = contiguous(&tangents, "tangents")?.as_chunks::<3>().0;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let crowding = run_parallel(py, "crowding", || {
+        sketchrodgs_polyline::crowding(axis, tangents, points, half_width, inner, outer)
+    })?;
+    Ok(crowding.into_pyarray(py))
 }
 
 /// (gaussian_ids (G,) int64, segment (G,) int32, t (G,) float32, offset (G, 3) float32,
@@ -309,6 +337,7 @@ fn stretches_array<'py>(py: Python<'py>, found: &[(usize, usize)]) -> PyResult<B
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_on_polyline, m)?)?;
     m.add_function(wrap_pyfunction!(cross_section_centroids, m)?)?;
+    m.add_function(wrap_pyfunction!(crowding, m)?)?;
     m.add_function(wrap_pyfunction!(segment_and_bind, m)?)?;
     m.add_function(wrap_pyfunction!(rows_in_box, m)?)?;
     m.add_function(wrap_pyfunction!(continuation, m)?)?;
