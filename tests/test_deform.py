@@ -42,6 +42,14 @@ def test_a_needle_sticking_out_of_a_bend_counts_and_a_rigid_move_does_not():
     assert dm.needle_fraction(rest, stuck, [AXIS], [bent_axis], R, rows=np.array([1])) == 0.0
 
 
+def test_a_flat_disk_whose_two_long_axes_trade_places_is_no_needle():
+    # a disk beside the axis, its long axes along the rod (x) and away from it (y), equal to 0.1 %
+    rest = scene_of([[0.5, 1.5 * R, 0]], [[2 * R, 0.999 * 2 * R, 0.2 * R]])
+    # a 0.2 % stretch makes y the longer one, and the disk moves 0.1 R along the rod: nothing sticks out
+    moved = scene_of([[0.5 + 0.1 * R, 1.5 * R, 0]], [[0.999 * 2 * R, 2 * R, 0.2 * R]])
+    assert dm.needle_fraction(rest, moved, [AXIS], [AXIS], R) == 0.0
+
+
 def test_neighbours_moving_apart_tear():
     rest = scene_of([[0.5, 0, 0], [0.5 + 0.1 * R, 0, 0], [0.9, 0, 0]], [[0.1 * R] * 3] * 3)
     together = scene_of(rest.means + [0, 2 * R, 0], rest.scales)

@@ -30,14 +30,22 @@ def _moved(rest: GaussianScene, deformed: GaussianScene, radius: float) -> np.nd
     return np.linalg.norm(deformed.means.astype(np.float64) - rest.means, axis=1) > MOVED * radius
 
 
-def _major_tips(scene: GaussianScene, rows: np.ndarray) -> np.ndarray:
-    """(2, G, 3) the 3-sigma tips of the rows' Gaussians along their longest axis."""
+def _reach(scene: GaussianScene, rows: np.ndarray, axes: list[np.ndarray]) -> np.ndarray:
+    """(G,) how far the rows' Gaussians reach from the nearest of `axes`: the largest distance of
+    their six 3-sigma tips (both ends of each own axis). All three axes count, not only the
+    longest: a flat disk's two long axes are equal, and a stretch turns which one is the longest,
+    which would swing a "major" tip by a right angle where nothing changed (docs/deformation.md,
+    "How it is measured")."""
     scales = scene.scales[rows].astype(np.float64)
-    major = np.argmax(scales, axis=1)
-    axes = Rotation.from_quat(scene.quats[rows][:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
-    direction = axes[np.arange(len(rows)), :, major] * (3 * scales[np.arange(len(rows)), major])[:, None]
+    frames = Rotation.from_quat(scene.quats[rows][:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
     centre = scene.means[rows].astype(np.float64)
-    return np.stack([centre + direction, centre - direction])
+    reach = np.zeros(len(rows))
+    for axis in range(3):
+        direction = frames[:, :, axis] * (3 * scales[:, axis])[:, None]
+        for tip in (centre + direction, centre - direction):
+            distance = np.min([_distance_to_polyline(tip, polyline) for polyline in axes], axis=0)
+            reach = np.maximum(reach, distance)
+    return reach
 
 
 def _distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
@@ -62,9 +70,9 @@ def needle_fraction(
     radius: float,
     rows: np.ndarray | None = None,
 ) -> float:
-    """Among the Gaussians that moved more than 0.05 R, the opacity-weighted fraction whose 3-sigma
-    tips along their major axis end up further from the deformed axes than they were from the
-    rest axes, by more than 0.5 R.
+    """Among the Gaussians that moved more than 0.05 R, the opacity-weighted fraction that reach
+    further from the deformed axes than they did from the rest axes, by more than 0.5 R (the reach:
+    the farthest of a Gaussian's 3-sigma tips along its own axes).
 
     Args:
         rest, deformed: the same scene (same rows) at rest and deformed.
@@ -82,13 +90,7 @@ def needle_fraction(
     rows = np.flatnonzero(moved)
     if len(rows) == 0:
         return 0.0
-    before = _major_tips(rest, rows)
-    after = _major_tips(deformed, rows)
-    out = np.zeros(len(rows), bool)
-    for tip in range(2):
-        d_rest = np.min([_distance_to_polyline(before[tip], axis) for axis in rest_axes], axis=0)
-        d_now = np.min([_distance_to_polyline(after[tip], axis) for axis in deformed_axes], axis=0)
-        out |= d_now - d_rest > NEEDLE * radius
+    out = _reach(deformed, rows, deformed_axes) - _reach(rest, rows, rest_axes) > NEEDLE * radius
     weight = rest.opacities[rows].astype(np.float64)
     return float(weight[out].sum() / max(weight.sum(), 1e-300))
 
