@@ -223,13 +223,14 @@ def test_an_end_that_turns_off_among_what_the_part_meets_is_cut_where_it_leaves_
     assert np.abs(cut[:, 1]).max() <= 0.75 * R and cut[-1, 0] >= 27 * R, cut[-1] / R
     np.testing.assert_array_equal(cut, turned[: len(cut)])  # what is kept stays where it was
     np.testing.assert_array_equal(pl.cut_junction_ends(turned[::-1], around, R), cut[::-1])  # either end
-    # kept: the same end where nothing lies around the part, or only over its last 3 R (a bud
-    # beside it, not a junction), a straight end among what it meets, and a bend 8 R from the end
-    # (the part's own: over 5 R deep)
+    # so is one where what lies around the part is a bud over its last 3 R, which the stroke's end led onto
     bud = np.concatenate([surface, rings(np.arange(27 * R, 30 * R, R / 4), 1.8 * R, 24)])
+    np.testing.assert_array_equal(pl.cut_junction_ends(turned, bud, R), cut)
+    # kept: the same end where nothing lies around the part, a straight end among what it meets, and
+    # a bend 8 R from the end (the part's own: over 5 R deep)
     bent = straight.copy()
     bent[:, 1] = 0.3 * np.maximum(x - 22 * R, 0)
-    for points, centres in ((turned, surface), (turned, bud), (straight, around), (bent, around)):
+    for points, centres in ((turned, surface), (straight, around), (bent, around)):
         np.testing.assert_array_equal(pl.cut_junction_ends(points, centres, R), points)
     # a part crowded all along (a sprinkle on its icing) has no line to judge its end by
     crowded = np.concatenate([surface, rings(np.arange(0, 30 * R, R / 4), 1.8 * R, 24)])

@@ -70,7 +70,7 @@ _BUMP_END = 3.0
 # cut_junction_ends: over the first `_JUNCTION_REGION` radii of each end, how crowded each cross-section
 # `2 * _JUNCTION_SLAB` R thick is (`_core.crowding`: the Gaussians `_JUNCTION_INNER` to `_JUNCTION_OUTER` R
 # off the axis over those within `_JUNCTION_INNER` R; averaged with its two neighbours); an end run
-# crowded over `_JUNCTION_CROWDED`, at least `_JUNCTION_LEAST` R long, is judged against the line of the
+# crowded over `_JUNCTION_CROWDED` is judged against the line of the
 # `_JUNCTION_BODY` R of axis inside it, and cut from where it strays over `_JUNCTION_OFF` R from that
 # line, unless that lies over `_JUNCTION_DEEPEST` R from the end
 _JUNCTION_REGION = 16.0
@@ -78,7 +78,6 @@ _JUNCTION_SLAB = 0.5
 _JUNCTION_INNER = 1.25
 _JUNCTION_OUTER = 2.5
 _JUNCTION_CROWDED = 0.5
-_JUNCTION_LEAST = 4.0
 _JUNCTION_BODY = 6.0
 _JUNCTION_OFF = 0.75
 _JUNCTION_DEEPEST = 5.0
@@ -272,7 +271,7 @@ def _junction_cut(q: np.ndarray, centres: np.ndarray, radius: float) -> int:
     # the end run of crowded cross-sections, which must end before the region does (a part crowded
     # all along, a sprinkle on its icing, has no line of its own to judge its end by)
     run = int(np.argmin(crowded))
-    if not crowded[0] or crowded.all() or arc[run] < _JUNCTION_LEAST * radius:
+    if not crowded[0] or crowded.all():
         return 0
     inner = int(np.searchsorted(arc, arc[run] + _JUNCTION_BODY * radius))
     if inner >= len(q):
