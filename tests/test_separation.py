@@ -1,6 +1,7 @@
 """Separation (docs/deformation.md, "Separation"): the part's shell is trimmed by the cut that
 splits the fewest close pairs between what moves and what stays, so a part leaves behind the
-piece of a crossing bar it touches, keeps its own skin, and a tie keeps a Gaussian with the part."""
+piece of a crossing bar it touches, keeps its own skin, a tie keeps a Gaussian with the part, and
+nothing is cut where the rod does not move."""
 
 from __future__ import annotations
 
@@ -65,6 +66,21 @@ def test_the_part_leaves_the_piece_of_a_crossing_bar_and_keeps_its_own_skin():
     rows = np.array([entry[row] for row in trimmed.gaussian_ids.tolist()])
     assert np.array_equal(binding.offset[rows], trimmed.offset)
     assert np.array_equal(binding.segment[rows], trimmed.segment)
+
+
+def test_where_the_rod_does_not_move_nothing_is_cut_for_it():
+    """A pair split where the rod's motion is eased to nothing (a clamped end inside what the part
+    meets) cannot tear, so the cut leaves it: the bar's piece stays with the part there."""
+    scene, bar = tube_with_crossing_bar()
+    binding = segment_and_bind(AXIS, scene, R)
+    took = np.intersect1d(binding.gaussian_ids, bar)
+    moving = trim_shell(scene.means, binding, R, np.ones(len(binding.gaussian_ids)))
+    assert np.array_equal(moving.gaussian_ids, trim_shell(scene.means, binding, R).gaussian_ids)
+    # held still within 1.5 R of where the bar crosses (x = 0), moving fully beyond
+    still = np.where(np.abs(scene.means[binding.gaussian_ids, 0]) < 1.5 * R, 0.0, 1.0)
+    held = trim_shell(scene.means, binding, R, still)
+    assert np.isin(took, held.gaussian_ids).all()
+    assert np.intersect1d(moving.gaussian_ids, bar).size < 0.1 * took.size
 
 
 def test_a_crossing_bar_of_another_colour_is_left_out_before_any_cut():

@@ -69,7 +69,8 @@ class Rig:
             taken: (N,) bool rows that belong elsewhere (another rod's, in the viewer): never
                 split or bound here.
             separate: trim the part's shell where it parts from what it touches, by the cut
-                that splits the fewest close pairs (`separation.trim_shell`).
+                that splits the fewest close pairs, each counted by the share of the motion it
+                takes (`separation.trim_shell`, with the `end_ramp` weights).
         """
         if len(extractions) != len(rods):
             raise SketchRodGSError(f"{len(extractions)} extractions but {len(rods)} rods")
@@ -93,7 +94,7 @@ class Rig:
                     fixed[: len(taken)] |= taken
                 scene, source, b = _split_needles(scene, source, b, extraction, fixed)
             if separate:
-                b = trim_shell(scene.means, b, extraction.radius)
+                b = trim_shell(scene.means, b, extraction.radius, clamped_end_weights(b, rod, extraction, end_ramp))
             bound.append(BoundRod.from_binding(scene, b, rod, clamped_end_weights(b, rod, extraction, end_ramp)))
         return cls(scene, source, bound)
 
