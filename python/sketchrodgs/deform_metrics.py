@@ -39,13 +39,10 @@ def _reach(scene: GaussianScene, rows: np.ndarray, axes: list[np.ndarray]) -> np
     scales = scene.scales[rows].astype(np.float64)
     frames = Rotation.from_quat(scene.quats[rows][:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
     centre = scene.means[rows].astype(np.float64)
-    reach = np.zeros(len(rows))
-    for axis in range(3):
-        direction = frames[:, :, axis] * (3 * scales[:, axis])[:, None]
-        for tip in (centre + direction, centre - direction):
-            distance = np.min([_distance_to_polyline(tip, polyline) for polyline in axes], axis=0)
-            reach = np.maximum(reach, distance)
-    return reach
+    directions = [frames[:, :, axis] * (3 * scales[:, axis])[:, None] for axis in range(3)]
+    tips = np.concatenate([centre + sign * direction for direction in directions for sign in (1, -1)])
+    distance = np.min([_distance_to_polyline(tips, polyline) for polyline in axes], axis=0)
+    return distance.reshape(6, len(rows)).max(axis=0)
 
 
 def _distance_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
