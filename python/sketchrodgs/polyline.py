@@ -70,9 +70,9 @@ _BUMP_END = 3.0
 # cut_junction_ends: over the first `_JUNCTION_REGION` radii of each end, how crowded each cross-section
 # `2 * _JUNCTION_SLAB` R thick is (`_core.crowding`: the Gaussians `_JUNCTION_INNER` to `_JUNCTION_OUTER` R
 # off the axis over those within `_JUNCTION_INNER` R; averaged with its two neighbours); an end run
-# crowded over `_JUNCTION_CROWDED` is judged against the line of the `_JUNCTION_BODY` R of axis inside
-# it, and cut from where it strays over `_JUNCTION_OFF` R from that line, unless that lies over
-# `_JUNCTION_DEEPEST` R from the end
+# crowded over `_JUNCTION_CROWDED` is judged against the line of the `_JUNCTION_BODY` R of axis just
+# inward of it, and cut from where it strays over `_JUNCTION_OFF` R from that line, unless that lies
+# over `_JUNCTION_DEEPEST` R from the end
 _JUNCTION_REGION = 16.0
 _JUNCTION_SLAB = 0.5
 _JUNCTION_INNER = 1.25
