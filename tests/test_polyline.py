@@ -226,12 +226,42 @@ def test_an_end_that_turns_off_among_what_the_part_meets_is_cut_where_it_leaves_
     # so is one where what lies around the part is a bud over its last 3 R, which the stroke's end led onto
     bud = np.concatenate([surface, rings(np.arange(27 * R, 30 * R, R / 4), 1.8 * R, 24)])
     np.testing.assert_array_equal(pl.cut_junction_ends(turned, bud, R), cut)
-    # kept: the same end where nothing lies around the part, a straight end among what it meets, and
-    # a bend 8 R from the end (the part's own: over 5 R deep)
+    # kept: the same end where nothing lies around the part (its surface turning with it), a straight
+    # end among what it meets, and a bend 8 R from the end (the part's own: over 5 R deep)
+    turned_surface = surface.copy()
+    turned_surface[:, 1] += np.repeat(0.6 * np.maximum(np.arange(0, 30 * R, R / 4) - 27 * R, 0), 12)
     bent = straight.copy()
     bent[:, 1] = 0.3 * np.maximum(x - 22 * R, 0)
-    for points, centres in ((turned, surface), (straight, around), (bent, around)):
+    for points, centres in ((turned, turned_surface), (straight, around), (bent, around)):
         np.testing.assert_array_equal(pl.cut_junction_ends(points, centres, R), points)
     # a part crowded all along (a sprinkle on its icing) has no line to judge its end by
     crowded = np.concatenate([surface, rings(np.arange(0, 30 * R, R / 4), 1.8 * R, 24)])
     np.testing.assert_array_equal(pl.cut_junction_ends(turned[-20:], crowded, R), turned[-20:])
+
+
+def test_a_stalk_past_a_node_is_cut_at_the_node_and_a_part_running_on_past_what_it_meets_is_kept():
+    # a stem 27 R long along x; what it meets lies around its last 7 R (rings 1.8 R off the axis: a
+    # node's leaves); the axis runs on 2 R past the node up a stalk that turns 45 degrees, free of the
+    # node (so the last cross-sections are not crowded: the stroke's end led onto the stalk)
+    x = np.arange(0, 27 * R, R / 2)
+    diagonal = np.array([np.sqrt(0.5), np.sqrt(0.5), 0.0])
+    stalk = np.array([27 * R, 0, 0]) + np.arange(R / 2, 2.01 * R, R / 2)[:, None] * diagonal
+    points = np.concatenate([np.stack([x, 0 * x, 0 * x], axis=1), stalk])
+    stalk_surface = rings(np.arange(-R / 2, 2 * R, R / 4), R, 12) @ np.array(
+        [diagonal, [-diagonal[1], diagonal[0], 0], [0, 0, 1]]
+    ).astype(np.float32) + np.array([27 * R, 0, 0], np.float32)
+    node = rings(np.arange(20 * R, 27.5 * R, R / 4), 1.8 * R, 24)
+    centres = np.concatenate([rings(np.arange(0, 27 * R, R / 4), R, 12), stalk_surface, node])
+    cut = pl.cut_junction_ends(points, centres, R)
+    assert np.abs(cut[:, 1]).max() <= 0.75 * R and cut[-1, 0] >= 27 * R and len(cut) < len(points), cut[-1] / R
+    np.testing.assert_array_equal(cut, points[: len(cut)])
+    np.testing.assert_array_equal(pl.cut_junction_ends(points[::-1], centres, R), cut[::-1])  # either end
+    # kept: a part that runs on past what it meets, its axis pushed 1 R aside there and back parallel
+    # (the guitar's front foot past the leg that stands on it; unguarded, this end lost 4 R)
+    x = np.arange(0, 29.01 * R, R / 2)
+    shift = np.clip((x - 24 * R) / (2 * R), 0, 1)
+    shifted = np.stack([x, R * shift * shift * (3 - 2 * shift), 0 * x], axis=1)
+    surface = rings(np.arange(0, 29.01 * R, R / 2), R, 12)
+    surface[:, 1] += np.repeat(shifted[:, 1], 12).astype(np.float32)
+    centres = np.concatenate([surface, node])
+    np.testing.assert_array_equal(pl.cut_junction_ends(shifted, centres, R), shifted)

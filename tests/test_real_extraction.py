@@ -49,7 +49,6 @@ MISSES = {
     "cross_given": {"heldout/plant_petiole_right"},
     "cross_estimated": {"heldout/plant_petiole_right"},
     "jitter": {
-        "cases/plant_side_stem_right",
         "heldout/plant_stem_back",
         "heldout/plant_petiole_right",
         "heldout/tree_branch_far_right",

@@ -72,7 +72,8 @@ _BUMP_END = 3.0
 # off the axis over those within `_JUNCTION_INNER` R; averaged with its two neighbours); an end run
 # crowded over `_JUNCTION_CROWDED` is judged against the line of the `_JUNCTION_BODY` R of axis just
 # inward of it, and cut from where it strays over `_JUNCTION_OFF` R from that line, unless that lies
-# over `_JUNCTION_DEEPEST` R from the end
+# over `_JUNCTION_DEEPEST` R from the end. A run may also start up to `_JUNCTION_FREE_TIP` R in from the end
+# (past a node onto a stalk); that free tip is cut only where it heads over `_JUNCTION_TURN` degrees off the line
 _JUNCTION_REGION = 16.0
 _JUNCTION_SLAB = 0.5
 _JUNCTION_INNER = 1.25
@@ -81,6 +82,8 @@ _JUNCTION_CROWDED = 0.4
 _JUNCTION_BODY = 6.0
 _JUNCTION_OFF = 0.75
 _JUNCTION_DEEPEST = 5.0
+_JUNCTION_FREE_TIP = 2.0
+_JUNCTION_TURN = 30.0
 
 
 def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
@@ -223,7 +226,8 @@ def cut_junction_ends(points: np.ndarray, centres: np.ndarray, radius: float) ->
     around its last cross-sections (they are crowded: `_core.crowding`), and the path and the axis
     follow whichever stalk or side the stroke's last pixels lead to. Such an end run is cut where the
     axis strays from the line of the part before it; a part that runs on straight through a crowded
-    end keeps it. Within a crowded run the end's course says nothing about the part.
+    end keeps it. Within a crowded run the end's course says nothing about the part. A rod that ran
+    through a node and a little way up a stalk past it (a free tip) is cut there if that tip turns off.
 
     Args:
         points: (M, 3) axis points in order, about R/2 apart.
@@ -264,20 +268,27 @@ def _junction_cut(q: np.ndarray, centres: np.ndarray, radius: float) -> int:
 
     # each averaged with its neighbours; past the end, as with none around (so the last two must be
     # clearly crowded: with the end's own value repeated past it, the guitar's front foot's rod ended
-    # 6 R short of its path at the leg it meets). Most ends are free: their last two tell at once.
-    if crowding(2).sum() / 3 < _JUNCTION_CROWDED:
+    # 6 R short of its path at the leg it meets). Most ends are free: their first few tell at once.
+    tip = int(np.searchsorted(arc, _JUNCTION_FREE_TIP * radius, side="right"))
+    near = np.convolve(crowding(min(tip + 1, len(region))), np.ones(3) / 3, mode="same")[:tip]
+    if (near < _JUNCTION_CROWDED).all():
         return 0
     crowded = np.convolve(crowding(len(region)), np.ones(3) / 3, mode="same") >= _JUNCTION_CROWDED
-    # the end run of crowded cross-sections, which must end before the region does (a part crowded
-    # all along, a sprinkle on its icing, has no line of its own to judge its end by)
-    run = int(np.argmin(crowded))
-    if not crowded[0] or crowded.all():
+    # the crowded run at the end, or just inward of a free tip; it must end before the region does
+    # (a part crowded all along, a sprinkle on its icing, has no line of its own to judge its end by)
+    first = int(np.argmax(crowded))
+    if crowded[first:].all():
         return 0
+    run = first + int(np.argmin(crowded[first:]))
     inner = int(np.searchsorted(arc, arc[run] + _JUNCTION_BODY * radius))
     if inner >= len(q):
         return 0
     direction = q[run] - q[inner]
     direction /= max(float(np.linalg.norm(direction)), 1e-30)
+    if first > 0:  # a free tip past the crowded run: cut only if it turns off (a stalk past a node)
+        heading = q[0] - q[tip]
+        if float(heading @ direction) > np.cos(np.radians(_JUNCTION_TURN)) * float(np.linalg.norm(heading)):
+            return 0
     offset = q[: run + 1] - q[run]
     off = np.linalg.norm(offset - (offset @ direction)[:, None] * direction, axis=1)
     stray = np.flatnonzero(off > _JUNCTION_OFF * radius)
