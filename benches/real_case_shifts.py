@@ -5,11 +5,14 @@ issue's jitter (3-8 px of noise, R given) does not show what a pixel does to the
 a rod that comes out shorter (the distances count only where the rods overlap). Both cores, about
 a minute (docs/extraction.md, "A pixel's shift").
 
-    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F]
+    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F] [--sideways K]
 
 Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
 its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `--save F` writes
 every view's figures to F (JSON); `--against F` lists the views whose figures moved since F.
+`--sideways K` moves each stroke sideways instead, by K times R on screen to either side (along its
+normal at each point, R at the rod's median depth): a stroke drawn along the part's edge
+(docs/extraction.md, "Drawn along an edge").
 """
 
 from __future__ import annotations
@@ -41,16 +44,16 @@ SHORT = 0.75  # and one shorter than this share of it
 SPREAD = 1.3  # and R estimates spreading over this ratio
 
 
-def shifted(scene, camera, stroke, radius, images, true_radius) -> dict[str, float]:
-    """The rod of `stroke` (R `radius`, None to estimate it) against the rods of its 8 shifts: the
-    largest distance (in `true_radius`), the least length ratio, the estimates' range (x
-    `true_radius`) and how many shifts failed."""
+def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[str, float]:
+    """The rod of `stroke` (R `radius`, None to estimate it) against the rods of the `moved` strokes:
+    the largest distance (in `true_radius`), the least length ratio, the estimates' range (x
+    `true_radius`) and how many moved strokes failed."""
     drawn = extract_rod(scene, camera, stroke, radius=radius, render=images)
     length = polyline_length(drawn.polyline)
     far, short, radii, failed = 0.0, 1.0, [drawn.radius], 0
-    for offset in SHIFTS:
+    for other in moved:
         try:
-            rod = extract_rod(scene, camera, stroke + offset, radius=radius, render=images)
+            rod = extract_rod(scene, camera, other, radius=radius, render=images)
         except PathNotFoundError:
             failed += 1
             continue
@@ -66,8 +69,9 @@ def shifted(scene, camera, stroke, radius, images, true_radius) -> dict[str, flo
     }
 
 
-def score(job: tuple[str, int]) -> list[dict]:
-    """The views of one case of the file `job[0]`, by index."""
+def score(job: tuple[str, int, float]) -> list[dict]:
+    """The views of one case of the file `job[0]`, by index `job[1]`, shifted by a pixel or, where
+    `job[2]` is not 0, moved sideways by that many R."""
     scenes, cases = realcases.load_cases(DATA / job[0])
     case = cases[job[1]]
     scene, radius = scenes[case["scene"]], float(case["radius"])
@@ -76,8 +80,13 @@ def score(job: tuple[str, int]) -> list[dict]:
         camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
         stroke = np.asarray(view["stroke"], np.float64)
         images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
-        given = shifted(scene, camera, stroke, radius, images, radius)
-        estimated = shifted(scene, camera, stroke, None, images, radius)
+        if job[2]:
+            rod = extract_rod(scene, camera, stroke, radius=radius, render=images).polyline
+            moved = realcases.sideways(stroke, camera, rod, radius, job[2])
+        else:
+            moved = [stroke + offset for offset in SHIFTS]
+        given = shifted(scene, camera, stroke, moved, radius, images, radius)
+        estimated = shifted(scene, camera, stroke, moved, None, images, radius)
         rows.append({"view": f"{case['name']}/{view['name']}", "given": given, "estimated": estimated})
     return rows
 
@@ -99,19 +108,21 @@ def main() -> None:
     parser.add_argument("--all", action="store_true", help="list every view, not only those missing a bound")
     parser.add_argument("--save", help="write every view's figures to this JSON file")
     parser.add_argument("--against", help="list the views whose figures moved since this file")
+    parser.add_argument("--sideways", type=float, default=0.0, help="move each stroke this many R to either side")
     args = parser.parse_args()
+    how = f"moved {args.sideways:g} R to either side" if args.sideways else "shifted by a pixel"
     every = []
     with Pool(2) as pool:
         for file, what in SETS:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
-            jobs = [(file, k) for k, case in enumerate(cases) if args.only in case["name"]]
+            jobs = [(file, k, args.sideways) for k, case in enumerate(cases) if args.only in case["name"]]
             rows = [row for rows in pool.map(score, jobs, chunksize=1) for row in rows]
             every += rows
             count = {bound: sum(missed(r)[bound] for r in rows) for bound in ("far", "short", "spread")}
             count["failed"] = sum(r["given"]["failed"] + r["estimated"]["failed"] for r in rows)
             print_table(
-                f"{what}, {len(rows)} views shifted by a pixel: {count['far']} with a rod over {FAR_R} R away, "
+                f"{what}, {len(rows)} views {how}: {count['far']} with a rod over {FAR_R} R away, "
                 f"{count['short']} under {SHORT:.0%} of the length, {count['spread']} with R over {SPREAD} x apart, "
                 f"{count['failed']} failed ({time.perf_counter() - start:.0f} s)",
                 ["view", "R given: max (R)", "least length", "R estimated: R / R", "max (R)", "least length", "failed"],

@@ -32,6 +32,7 @@ from sketchrodgs.realcases import (
     load_cases,
     run_case,
     score_case,
+    sideways,
     turned_camera,
 )
 
@@ -290,6 +291,24 @@ def test_a_jittered_stroke_over_a_sprinkle_as_much_on_the_icing_finds_both_colou
     jittered = jittered_strokes(stroke, count=10, seed=jitter_seed("sprinkle_14", "az000", 4))[2]
     drawn, rod = (extract_rod(scene, camera, s, radius=case["radius"]) for s in (stroke, jittered))
     assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
+
+
+@pytest.mark.parametrize(
+    ("group", "name", "view", "k", "side", "radius_given"),
+    [("sprinkles", "sprinkle_15", "az270", 0.7, 0, True), ("heldout", "tree_finger_far_left", "az315", 1.0, 0, False)],
+)
+def test_a_stroke_drawn_along_the_parts_edge_gives_its_rod(group, name, view, k, side, radius_given):
+    """A stroke drawn along one side of the part (`realcases.sideways`, docs/extraction.md, "Drawn
+    along an edge"): sprinkle_15's along its edge, 0.7 R aside, found no colours (the icing's two
+    shades split first) and its path ran over the icing's edge, one big Gaussian: refused as too
+    short. A tree finger's on its silhouette, a pixel outside it, with R estimated, had no covered
+    pixel under any sample: refused as lying on the background."""
+    scene, case, camera, stroke = _case_view(group, name, view)
+    drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
+    moved = sideways(stroke, camera, drawn.polyline, case["radius"], k)[side]
+    rod = extract_rod(scene, camera, moved, radius=case["radius"] if radius_given else None)
+    assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
+    assert TARGETS["radius_low"] <= rod.radius / case["radius"] <= TARGETS["radius_high"]
 
 
 def test_a_sprinkle_on_the_icing_estimates_its_radius_across_its_colour():

@@ -234,6 +234,17 @@ def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
     )
 
 
+def sideways(stroke: np.ndarray, camera: Camera, rod: np.ndarray, radius: float, k: float) -> list[np.ndarray]:
+    """`stroke` moved by `k` times `radius` on screen to either side, along its normal at each
+    point, the radius taken on screen at the median depth of `rod` (a stroke drawn along one side of
+    the part: docs/extraction.md, "Drawn along an edge")."""
+    radius_px = radius * camera.fx / float(np.median(camera.project(np.asarray(rod, np.float64))[1]))
+    tangent = np.gradient(stroke, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    return [stroke + side * k * radius_px * normal for side in (-1.0, 1.0)]
+
+
 def end_gap(extraction: Extraction) -> float:
     """How far the rod stops short of its path, in units of R: the larger, over both ends of the
     pixel path, of the on-screen distance from that end to the projected polyline, with R taken

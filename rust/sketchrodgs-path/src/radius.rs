@@ -72,8 +72,13 @@ pub fn estimate_radius(
     let max_px = image.width.max(image.height) / 8;
     // pass 1: a loose clean-up (any depth) only to get the resampled, smoothed samples
     let loose = clean_stroke(image, stroke, band_px, f32::INFINITY, 0.0, None)?;
-    let under: Vec<Option<usize>> =
+    let mut under: Vec<Option<usize>> =
         loose.points.iter().map(|p| image.pixel_at(p[0], p[1]).filter(|&q| image.covered(q))).collect();
+    if under.iter().all(Option::is_none) {
+        // a stroke along the part's silhouette, just off it: measure from the nearest covered pixel
+        // within the band (the search reaches the part from there too)
+        under = loose.points.iter().map(|&p| nearest_covered(image, p, band_px)).collect();
+    }
     let (first, _) = half_widths(image, &loose, &under, focal, max_px, None);
     let gap_at = |r: f32| crate::depth_gap(image, stroke, r, focal);
     let Some(rough) = slender_cluster(&first, gap_at) else { return Err(PathError::StrokeOnBackground) };
@@ -119,6 +124,24 @@ pub fn estimate_radius(
         }
     }
     Ok(RadiusEstimate { radius, wants_behind })
+}
+
+/// The covered pixel nearest `point` within `reach` pixels, if any.
+fn nearest_covered(image: &IndexImage, point: [f32; 2], reach: f32) -> Option<usize> {
+    let steps = reach.ceil() as i64;
+    let (cx, cy) = (point[0].floor() as i64, point[1].floor() as i64);
+    let mut best: Option<(f32, usize)> = None;
+    for row in (cy - steps).max(0)..=(cy + steps).min(image.height as i64 - 1) {
+        for col in (cx - steps).max(0)..=(cx + steps).min(image.width as i64 - 1) {
+            let (dx, dy) = (col as f32 + 0.5 - point[0], row as f32 + 0.5 - point[1]);
+            let d = (dx * dx + dy * dy).sqrt();
+            let q = row as usize * image.width + col as usize;
+            if d <= reach && best.is_none_or(|(bd, _)| d < bd) && image.covered(q) {
+                best = Some((d, q));
+            }
+        }
+    }
+    best.map(|(_, q)| q)
 }
 
 /// The half-widths in world units at the samples that have a pixel (walks stopping where the

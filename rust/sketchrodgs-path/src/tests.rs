@@ -380,6 +380,19 @@ fn the_radius_is_half_the_visible_width() {
 }
 
 #[test]
+fn a_stroke_just_off_the_ropes_silhouette_measures_the_rope() {
+    // drawn along the rope's edge, a pixel outside it (rows 19..=21: the stroke on row 22): no
+    // sample has the rope under it, but the rope lies within the band, as the search finds it
+    let scene = Synthetic::new(80, 40, FOCAL, rope);
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let radius = estimate_radius(&scene.image(), &[[2.5, 22.5], [77.5, 22.5]], &params).unwrap().radius;
+    assert!((radius - 0.075).abs() < 0.01, "R = {radius}");
+    // beyond the band it is on the background
+    let far = estimate_radius(&scene.image(), &[[2.5, 30.5], [77.5, 30.5]], &params);
+    assert_eq!(far.unwrap_err(), PathError::StrokeOnBackground);
+}
+
+#[test]
 fn the_radius_of_a_rope_mostly_behind_a_leaf_is_the_ropes() {
     // A leaf 21 px wide (rows 10..=30) one unit in front of the rope covers cols 20..=60, half the
     // stroke: the median width under the stroke is the leaf's, the slender cluster the rope's.
