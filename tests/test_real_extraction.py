@@ -130,6 +130,29 @@ def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
     assert not failed, failed
 
 
+@pytest.mark.parametrize("group", sorted(CASE_FILES))
+def test_a_stroke_half_a_radius_off_the_middle_still_gives_a_rod(group):
+    """Every view's stroke moved half R aside, either way (`realcases.sideways`), gives a rod with R
+    given and estimated: users draw off a part's middle (benches/real_case_shifts.py --sideways
+    measures how far such rods move; docs/extraction.md, "Drawn along an edge")."""
+    scenes, cases = load_cases(CASE_FILES[group])
+    failed = []
+    for case in cases:
+        scene = scenes[case["scene"]]
+        for view in case["views"]:
+            camera = Camera.from_dict(view["camera"], view["name"])
+            stroke = np.asarray(view["stroke"], np.float64)
+            images = render(scene, camera, outputs=SOLID_OUTPUTS)
+            drawn = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+            for moved in sideways(stroke, camera, drawn.polyline, case["radius"], 0.5):
+                for radius in (case["radius"], None):
+                    try:
+                        extract_rod(scene, camera, moved, radius=radius, render=images)
+                    except PathNotFoundError as error:
+                        failed.append(f"{case['name']}/{view['name']} R {radius}: {error}")
+    assert not failed, failed
+
+
 def test_at_most_3_percent_of_jittered_strokes_fail(scored):
     failures = sum(score.jitter_failures for _, score in scored.values())
     count = sum(score.jitter_count for _, score in scored.values())
