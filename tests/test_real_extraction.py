@@ -35,6 +35,7 @@ from sketchrodgs.realcases import (
     sideways,
     turned_camera,
 )
+from sketchrodgs.viewer.feedback import describe_failure
 
 DATA = Path(__file__).parent / "data" / "real_cases"
 CASE_FILES = {
@@ -332,6 +333,20 @@ def test_a_stroke_drawn_along_the_parts_edge_gives_its_rod(group, name, view, k,
     rod = extract_rod(scene, camera, moved, radius=case["radius"] if radius_given else None)
     assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
     assert TARGETS["radius_low"] <= rod.radius / case["radius"] <= TARGETS["radius_high"]
+
+
+def test_a_stroke_along_a_sprinkles_edge_that_fails_says_to_draw_along_its_middle():
+    """sprinkle_01 in az180 stroked along its edge, 0.7 R aside: the path runs 120 px over the
+    icing's edge, which one big icing Gaussian owns, and no rod can be made. The error says what to
+    change: not a longer stroke or a smaller radius, but the stroke along the middle
+    (docs/extraction.md, "Drawn along an edge"); the viewer says it in the user's terms."""
+    scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_01", "az180")
+    drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
+    moved = sideways(stroke, camera, drawn.polyline, case["radius"], 0.7)[0]
+    with pytest.raises(PathNotFoundError, match="along the object's middle, not its edge") as failure:
+        extract_rod(scene, camera, moved, radius=case["radius"])
+    assert len(failure.value.pixel_path) > 0  # the overlay still draws the path it found
+    assert "edge" in describe_failure(failure.value)
 
 
 def test_a_sprinkle_on_the_icing_estimates_its_radius_across_its_colour():

@@ -410,9 +410,18 @@ def _extract(
         points = line if pl.polyline_length(line) > pl.polyline_length(points) else points
     if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
         length = pl.polyline_length(points) if len(points) > 1 else 0.0
+        path_px = sum(len(p.pixels) for p in pieces)
+        # a long path on under two of the part's Gaussians ran over what the part lies on or
+        # touches, one big Gaussian owning its pixels: the stroke lay along the part's edge
+        # (docs/extraction.md, "Drawn along an edge")
+        what = (
+            f"draw the stroke along the object's middle, not its edge (the path ran {path_px} px over what it lies on)"
+            if len(path_ids) < 2 and path_px >= _EDGE_PATH_PX
+            else "draw the stroke along more of the object, or give a smaller --radius"
+        )
         raise _failure(
             f"the path under the stroke is too short for a rod ({len(path_ids)} Gaussians, {length:.3g} long, "
-            f"radius {radius:.3g}): draw the stroke along more of the object, or give a smaller --radius",
+            f"radius {radius:.3g}): {what}",
             stroke,
             pixel_path,
             pieces,
@@ -484,6 +493,10 @@ def _line_over_path_pixels(
     along = (unprojected - middle) @ direction
     return np.stack([middle + along.min() * direction, middle + along.max() * direction])
 
+
+# A failed path this many pixels long on under two of the part's Gaussians ran along the part's edge
+# (the error says so)
+_EDGE_PATH_PX = 20
 
 # A path piece lost where an occluder hides the part may have climbed onto it first: its pixels
 # nearer the break than `_BREAK_WINDOW_R[0]` R that lie `_BREAK_AHEAD_R` R in front of the part's

@@ -30,6 +30,7 @@ FAILURES = (
     ("meets an object at only", "The stroke barely touches an object: draw it along the part, from end to end."),
     ("needs at least 2 distinct points", "The stroke is too short: drag along the part, from end to end."),
     ("single point", "The stroke is a single point: drag along the part, from end to end."),
+    ("not its edge", "The stroke runs along the part's edge: draw it along the part's middle."),
     (
         "too short for a rod",
         "The part under the stroke is too short for a rod: draw along more of it, or set a smaller "
