@@ -5,14 +5,15 @@ issue's jitter (3-8 px of noise, R given) does not show what a pixel does to the
 a rod that comes out shorter (the distances count only where the rods overlap). Both cores, about
 a minute (docs/extraction.md, "A pixel's shift").
 
-    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F] [--sideways K]
+    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F] [--sideways K | --overshoot PX]
 
 Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
 its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `--save F` writes
 every view's figures to F (JSON); `--against F` lists the views whose figures moved since F.
 `--sideways K` moves each stroke sideways instead, by K times R on screen to either side (along its
 normal at each point, R at the rod's median depth): a stroke drawn along the part's edge
-(docs/extraction.md, "Drawn along an edge").
+(docs/extraction.md, "Drawn along an edge"). `--overshoot PX` carries each stroke's first point,
+then its last, PX pixels further along its end's direction: a stroke drawn on past the part's end.
 """
 
 from __future__ import annotations
@@ -69,9 +70,10 @@ def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[s
     }
 
 
-def score(job: tuple[str, int, float]) -> list[dict]:
+def score(job: tuple[str, int, float, float]) -> list[dict]:
     """The views of one case of the file `job[0]`, by index `job[1]`, shifted by a pixel or, where
-    `job[2]` is not 0, moved sideways by that many R."""
+    `job[2]` is not 0, moved sideways by that many R, or where `job[3]` is not 0, with each end
+    carried that many pixels on."""
     scenes, cases = realcases.load_cases(DATA / job[0])
     case = cases[job[1]]
     scene, radius = scenes[case["scene"]], float(case["radius"])
@@ -83,6 +85,8 @@ def score(job: tuple[str, int, float]) -> list[dict]:
         if job[2]:
             rod = extract_rod(scene, camera, stroke, radius=radius, render=images).polyline
             moved = realcases.sideways(stroke, camera, rod, radius, job[2])
+        elif job[3]:
+            moved = realcases.overshooting(stroke, job[3])
         else:
             moved = [stroke + offset for offset in SHIFTS]
         given = shifted(scene, camera, stroke, moved, radius, images, radius)
@@ -109,14 +113,25 @@ def main() -> None:
     parser.add_argument("--save", help="write every view's figures to this JSON file")
     parser.add_argument("--against", help="list the views whose figures moved since this file")
     parser.add_argument("--sideways", type=float, default=0.0, help="move each stroke this many R to either side")
+    parser.add_argument("--overshoot", type=float, default=0.0, help="carry each stroke's ends this many px on")
     args = parser.parse_args()
-    how = f"moved {args.sideways:g} R to either side" if args.sideways else "shifted by a pixel"
+    if args.sideways and args.overshoot:
+        parser.error("--sideways and --overshoot measure one at a time")
+    how = (
+        f"moved {args.sideways:g} R to either side"
+        if args.sideways
+        else f"with an end carried {args.overshoot:g} px on"
+        if args.overshoot
+        else "shifted by a pixel"
+    )
     every = []
     with Pool(2) as pool:
         for file, what in SETS:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
-            jobs = [(file, k, args.sideways) for k, case in enumerate(cases) if args.only in case["name"]]
+            jobs = [
+                (file, k, args.sideways, args.overshoot) for k, case in enumerate(cases) if args.only in case["name"]
+            ]
             rows = [row for rows in pool.map(score, jobs, chunksize=1) for row in rows]
             every += rows
             count = {bound: sum(missed(r)[bound] for r in rows) for bound in ("far", "short", "spread")}

@@ -245,6 +245,18 @@ def sideways(stroke: np.ndarray, camera: Camera, rod: np.ndarray, radius: float,
     return [stroke + side * k * radius_px * normal for side in (-1.0, 1.0)]
 
 
+def overshooting(stroke: np.ndarray, px: float) -> list[np.ndarray]:
+    """`stroke` with its first point, then its last, carried `px` pixels further along its end's
+    direction: a stroke drawn on past the part's end (docs/extraction.md, "Drawn along an edge")."""
+    strokes = []
+    for end, before in ((0, 1), (-1, -2)):
+        direction = stroke[end] - stroke[before]
+        longer = stroke.copy()
+        longer[end] = stroke[end] + px * direction / max(float(np.linalg.norm(direction)), 1e-12)
+        strokes.append(longer)
+    return strokes
+
+
 def end_gap(extraction: Extraction) -> float:
     """How far the rod stops short of its path, in units of R: the larger, over both ends of the
     pixel path, of the on-screen distance from that end to the projected polyline, with R taken
