@@ -30,6 +30,7 @@ from sketchrodgs.realcases import (
     end_gap,
     jitter_seed,
     load_cases,
+    overshooting,
     run_case,
     score_case,
     sideways,
@@ -315,6 +316,28 @@ def test_a_jittered_stroke_over_a_sprinkle_as_much_on_the_icing_finds_both_colou
     jittered = jittered_strokes(stroke, count=10, seed=jitter_seed("sprinkle_14", "az000", 4))[2]
     drawn, rod = (extract_rod(scene, camera, s, radius=case["radius"]) for s in (stroke, jittered))
     assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
+
+
+@pytest.mark.parametrize("group", sorted(CASE_FILES))
+def test_a_stroke_drawn_30_px_past_either_end_still_gives_a_rod(group):
+    """Every view's stroke with its first or its last point carried 30 px on along its end's
+    direction (`realcases.overshooting`: the issue's overshoots run 10-30 px onto the background or
+    a neighbour) gives a rod, R given and estimated: the stroke is trimmed to where it meets the
+    part, not refused (docs/extraction.md, "Drawn on past an end")."""
+    scenes, cases = load_cases(CASE_FILES[group])
+    failed = []
+    for case in cases:
+        scene = scenes[case["scene"]]
+        for view in case["views"]:
+            camera = Camera.from_dict(view["camera"], view["name"])
+            images = render(scene, camera, outputs=SOLID_OUTPUTS)
+            for longer in overshooting(np.asarray(view["stroke"], np.float64), 30.0):
+                for radius in (case["radius"], None):
+                    try:
+                        extract_rod(scene, camera, longer, radius=radius, render=images)
+                    except PathNotFoundError as error:
+                        failed.append(f"{case['name']}/{view['name']} R {radius}: {error}")
+    assert not failed, failed
 
 
 @pytest.mark.parametrize(
