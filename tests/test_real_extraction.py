@@ -111,24 +111,35 @@ def test_no_unjittered_stroke_fails(scored, name):
         )
 
 
+def _strokes_that_fail(group: str, moved, radius_given: bool) -> list[str]:
+    """Every view of `group` with each stroke `moved(scene, case, camera, stroke, images)` gives in place
+    of its own, extracted with R estimated (and with R given where `radius_given`): those that make
+    no rod, named with the error."""
+    scenes, cases = load_cases(CASE_FILES[group])
+    failed = []
+    for case in cases:
+        scene = scenes[case["scene"]]
+        radii = (case["radius"], None) if radius_given else (None,)
+        for view in case["views"]:
+            camera = Camera.from_dict(view["camera"], view["name"])
+            images = render(scene, camera, outputs=SOLID_OUTPUTS)
+            strokes = moved(scene, case, camera, np.asarray(view["stroke"], np.float64), images)
+            for k, stroke in enumerate(strokes):
+                for radius in radii:
+                    try:
+                        extract_rod(scene, camera, stroke, radius=radius, render=images)
+                    except PathNotFoundError as error:
+                        failed.append(f"{case['name']}/{view['name']} #{k} R {radius}: {error}")
+    return failed
+
+
 @pytest.mark.parametrize("group", sorted(CASE_FILES))
 def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
     """Every view's stroke moved by a pixel left, right, up or down gives a rod with R estimated,
     where the radius estimate and the depth chain decide most (benches/real_case_shifts.py measures
     how far such rods move; docs/extraction.md, "A pixel's shift")."""
-    scenes, cases = load_cases(CASE_FILES[group])
-    failed = []
-    for case in cases:
-        scene = scenes[case["scene"]]
-        for view in case["views"]:
-            camera = Camera.from_dict(view["camera"], view["name"])
-            stroke = np.asarray(view["stroke"], np.float64)
-            images = render(scene, camera, outputs=SOLID_OUTPUTS)
-            for offset in ((-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)):
-                try:
-                    extract_rod(scene, camera, stroke + offset, render=images)
-                except PathNotFoundError as error:
-                    failed.append(f"{case['name']}/{view['name']} {offset}: {error}")
+    offsets = ((-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0))
+    failed = _strokes_that_fail(group, lambda scene, case, camera, stroke, images: [stroke + o for o in offsets], False)
     assert not failed, failed
 
 
@@ -137,21 +148,12 @@ def test_a_stroke_half_a_radius_off_the_middle_still_gives_a_rod(group):
     """Every view's stroke moved half R aside, either way (`realcases.sideways`), gives a rod with R
     given and estimated: users draw off a part's middle (benches/real_case_shifts.py --sideways
     measures how far such rods move; docs/extraction.md, "Drawn along an edge")."""
-    scenes, cases = load_cases(CASE_FILES[group])
-    failed = []
-    for case in cases:
-        scene = scenes[case["scene"]]
-        for view in case["views"]:
-            camera = Camera.from_dict(view["camera"], view["name"])
-            stroke = np.asarray(view["stroke"], np.float64)
-            images = render(scene, camera, outputs=SOLID_OUTPUTS)
-            drawn = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
-            for moved in sideways(stroke, camera, drawn.polyline, case["radius"], 0.5):
-                for radius in (case["radius"], None):
-                    try:
-                        extract_rod(scene, camera, moved, radius=radius, render=images)
-                    except PathNotFoundError as error:
-                        failed.append(f"{case['name']}/{view['name']} R {radius}: {error}")
+
+    def aside(scene, case, camera, stroke, images):
+        drawn = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+        return sideways(stroke, camera, drawn.polyline, case["radius"], 0.5)
+
+    failed = _strokes_that_fail(group, aside, True)
     assert not failed, failed
 
 
@@ -324,19 +326,7 @@ def test_a_stroke_drawn_30_px_past_either_end_still_gives_a_rod(group):
     direction (`realcases.overshooting`: the issue's overshoots run 10-30 px onto the background or
     a neighbour) gives a rod, R given and estimated: the stroke is trimmed to where it meets the
     part, not refused (docs/extraction.md, "Drawn on past an end")."""
-    scenes, cases = load_cases(CASE_FILES[group])
-    failed = []
-    for case in cases:
-        scene = scenes[case["scene"]]
-        for view in case["views"]:
-            camera = Camera.from_dict(view["camera"], view["name"])
-            images = render(scene, camera, outputs=SOLID_OUTPUTS)
-            for longer in overshooting(np.asarray(view["stroke"], np.float64), 30.0):
-                for radius in (case["radius"], None):
-                    try:
-                        extract_rod(scene, camera, longer, radius=radius, render=images)
-                    except PathNotFoundError as error:
-                        failed.append(f"{case['name']}/{view['name']} R {radius}: {error}")
+    failed = _strokes_that_fail(group, lambda scene, case, camera, stroke, images: overshooting(stroke, 30.0), True)
     assert not failed, failed
 
 
