@@ -290,7 +290,7 @@ def extract_rod(
         recentre: move the visible surface points onto the axis (our addition; the paper keeps them).
         render: a render of `scene` by `camera` with `index`, `index_depth` and `alpha` (made if
             None; without alpha, widths are measured on the index image alone).
-        working_width: a view wider than this is traced on a copy scaled down to this width, so that
+        working_width: a view of another width is traced on a copy scaled to this width, so that
             the rod does not depend on the resolution (docs/extraction.md, "Resolution"); None
             traces every view at its own size.
 
@@ -904,7 +904,7 @@ def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, ba
     """R from the object's visible width under `stroke` (docs/extraction.md, "Radius"): half the
     width of the surface across the stroke, where it stays solid (alpha >= 0.5) and its depth does
     not jump, in world units at its depth; the median over the stroke's samples on the object. A
-    view wider than `WORKING_WIDTH` is measured scaled down to it, as `extract_rod` does."""
+    view of another width is measured scaled to `WORKING_WIDTH`, as `extract_rod` traces it."""
     stroke = _check_stroke(stroke)
     _check_render_size(render, camera)
     view = WorkingView.of(camera)

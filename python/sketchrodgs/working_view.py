@@ -1,11 +1,13 @@
-"""The view a sketch is traced on: the user's view, scaled down to `WORKING_WIDTH` pixels wide where
-it is wider (docs/extraction.md, "Resolution").
+"""The view a sketch is traced on: the user's view, scaled to `WORKING_WIDTH` pixels wide
+(docs/extraction.md, "Resolution").
 
 Extraction's rules measure in pixels (the depth gap floor of the width walks, the stroke's
 smoothing, the band), and were set on 960x540 views. A pixel's world size halves when the same view
 is rendered at twice the width, so at 1920x1080 the width walks split a flat stand leg's depths into
 clusters and its radius came out at a third of the 960 px view's. Tracing a larger view on a copy scaled down to 960
-pixels wide makes the rod the same at any resolution, and the work that of a 960-pixel view.
+pixels wide makes the rod the same at any resolution, and the work that of a 960-pixel view. A
+smaller view is traced on a copy scaled up to 960 pixels for the same reason: at 480x270 the
+radius estimates of 6 of the real cases' 39 views left 0.7-1.4 x R (none at 960).
 """
 
 from __future__ import annotations
@@ -36,9 +38,9 @@ class WorkingView:
 
     @classmethod
     def of(cls, camera: Camera, working_width: int | None = WORKING_WIDTH) -> WorkingView:
-        """`camera` as it is where it is at most `working_width` wide (or `working_width` is None),
-        else scaled down to that width (the height keeps the aspect ratio)."""
-        if working_width is None or camera.width <= working_width:
+        """`camera` as it is where it is `working_width` wide (or `working_width` is None), else
+        scaled to that width (the height keeps the aspect ratio)."""
+        if working_width is None or camera.width == working_width:
             return cls(camera, camera, (1.0, 1.0))
         work = camera.resized(working_width)
         return cls(camera, work, (work.width / camera.width, work.height / camera.height))
