@@ -5,7 +5,8 @@ issue's jitter (3-8 px of noise, R given) does not show what a pixel does to the
 a rod that comes out shorter (the distances count only where the rods overlap). Both cores, about
 a minute (docs/extraction.md, "A pixel's shift").
 
-    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F] [--sideways K | --overshoot PX]
+    python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F]
+        [--sideways K | --overshoot PX | --zoom F]
 
 Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
 its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `--save F` writes
@@ -14,6 +15,9 @@ every view's figures to F (JSON); `--against F` lists the views whose figures mo
 normal at each point, R at the rod's median depth): a stroke drawn along the part's edge
 (docs/extraction.md, "Drawn along an edge"). `--overshoot PX` carries each stroke's first point,
 then its last, PX pixels further along its end's direction: a stroke drawn on past the part's end.
+`--zoom F` draws each stroke in its camera zoomed in by F and out by F about the stroke's centre: the
+part at F times and 1/F times its pixels, at the same image size (docs/extraction.md, "Resolution");
+a stroke zoomed in past the image's edge is left out.
 """
 
 from __future__ import annotations
@@ -46,15 +50,15 @@ SPREAD = 1.3  # and R estimates spreading over this ratio
 
 
 def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[str, float]:
-    """The rod of `stroke` (R `radius`, None to estimate it) against the rods of the `moved` strokes:
-    the largest distance (in `true_radius`), the least length ratio, the estimates' range (x
-    `true_radius`) and how many moved strokes failed."""
+    """The rod of `stroke` (R `radius`, None to estimate it) against the rods of the `moved` strokes,
+    each (camera, stroke, render or None): the largest distance (in `true_radius`), the least length
+    ratio, the estimates' range (x `true_radius`) and how many moved strokes failed."""
     drawn = extract_rod(scene, camera, stroke, radius=radius, render=images)
     length = polyline_length(drawn.polyline)
     far, short, radii, failed = 0.0, 1.0, [drawn.radius], 0
-    for other in moved:
+    for other_camera, other, other_images in moved:
         try:
-            rod = extract_rod(scene, camera, other, radius=radius, render=images)
+            rod = extract_rod(scene, other_camera, other, radius=radius, render=other_images)
         except PathNotFoundError:
             failed += 1
             continue
@@ -70,10 +74,10 @@ def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[s
     }
 
 
-def score(job: tuple[str, int, float, float]) -> list[dict]:
+def score(job: tuple[str, int, float, float, float]) -> list[dict]:
     """The views of one case of the file `job[0]`, by index `job[1]`, shifted by a pixel or, where
-    `job[2]` is not 0, moved sideways by that many R, or where `job[3]` is not 0, with each end
-    carried that many pixels on."""
+    `job[2]` is not 0, moved sideways by that many R, where `job[3]` is not 0, with each end carried
+    that many pixels on, or where `job[4]` is not 0, zoomed in and out by that factor."""
     scenes, cases = realcases.load_cases(DATA / job[0])
     case = cases[job[1]]
     scene, radius = scenes[case["scene"]], float(case["radius"])
@@ -84,11 +88,15 @@ def score(job: tuple[str, int, float, float]) -> list[dict]:
         images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
         if job[2]:
             rod = extract_rod(scene, camera, stroke, radius=radius, render=images).polyline
-            moved = realcases.sideways(stroke, camera, rod, radius, job[2])
+            moved = [(camera, s, images) for s in realcases.sideways(stroke, camera, rod, radius, job[2])]
         elif job[3]:
-            moved = realcases.overshooting(stroke, job[3])
+            moved = [(camera, s, images) for s in realcases.overshooting(stroke, job[3])]
+        elif job[4]:
+            zoomed = [realcases.zoomed(camera, stroke, f) for f in (job[4], 1 / job[4])]
+            # (a stroke zoomed in past the image's edge would give a shorter rod for that alone)
+            moved = [(c, s, None) for c, s in zoomed if (s >= 0).all() and (s < [c.width, c.height]).all()]
         else:
-            moved = [stroke + offset for offset in SHIFTS]
+            moved = [(camera, stroke + offset, images) for offset in SHIFTS]
         given = shifted(scene, camera, stroke, moved, radius, images, radius)
         estimated = shifted(scene, camera, stroke, moved, None, images, radius)
         rows.append({"view": f"{case['name']}/{view['name']}", "given": given, "estimated": estimated})
@@ -114,14 +122,19 @@ def main() -> None:
     parser.add_argument("--against", help="list the views whose figures moved since this file")
     parser.add_argument("--sideways", type=float, default=0.0, help="move each stroke this many R to either side")
     parser.add_argument("--overshoot", type=float, default=0.0, help="carry each stroke's ends this many px on")
+    parser.add_argument("--zoom", type=float, default=0.0, help="zoom each view in and out by this factor (> 1)")
     args = parser.parse_args()
-    if args.sideways and args.overshoot:
-        parser.error("--sideways and --overshoot measure one at a time")
+    if (args.sideways != 0) + (args.overshoot != 0) + (args.zoom != 0) > 1:
+        parser.error("--sideways, --overshoot and --zoom measure one at a time")
+    if args.zoom and not args.zoom > 1:
+        parser.error(f"--zoom: a factor over 1, got {args.zoom:g}")
     how = (
         f"moved {args.sideways:g} R to either side"
         if args.sideways
         else f"with an end carried {args.overshoot:g} px on"
         if args.overshoot
+        else f"zoomed {args.zoom:g} x in and out"
+        if args.zoom
         else "shifted by a pixel"
     )
     every = []
@@ -130,7 +143,9 @@ def main() -> None:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
             jobs = [
-                (file, k, args.sideways, args.overshoot) for k, case in enumerate(cases) if args.only in case["name"]
+                (file, k, args.sideways, args.overshoot, args.zoom)
+                for k, case in enumerate(cases)
+                if args.only in case["name"]
             ]
             rows = [row for rows in pool.map(score, jobs, chunksize=1) for row in rows]
             every += rows

@@ -79,3 +79,24 @@ def test_log_excess_sums_how_far_each_missed_distance_is_from_its_target() -> No
     assert len(score.misses()) == 5
     score.cross_max = np.inf
     assert score.log_excess() == np.inf
+
+
+@pytest.mark.parametrize("factor", [1.5, 1 / 1.5])
+def test_a_zoomed_view_shows_the_part_at_that_many_times_its_pixels_about_the_strokes_centre(factor) -> None:
+    """`realcases.zoomed` (benches/real_case_shifts.py --zoom): every point of the scene lands
+    `factor` times as far from the stroke's centre as it did, and the stroke drawn in the zoomed
+    view lies over what it lay over."""
+    from sketchrodgs.realcases import zoomed
+
+    view = CASES["cases"][0]["views"][0]
+    camera = Camera.from_dict(view["camera"])
+    stroke = np.asarray(view["stroke"], np.float64)
+    zoomed_camera, zoomed_stroke = zoomed(camera, stroke, factor)
+    centre = (stroke.min(axis=0) + stroke.max(axis=0)) / 2
+    points = camera.unproject(stroke, np.full(len(stroke), 0.7))
+    uv, z = camera.project(points)
+    uv_zoomed, z_zoomed = zoomed_camera.project(points)
+    np.testing.assert_allclose(uv_zoomed, centre + (uv - centre) * factor, atol=1e-6)
+    np.testing.assert_allclose(z_zoomed, z)
+    np.testing.assert_allclose(uv_zoomed, zoomed_stroke, atol=1e-6)
+    assert (zoomed_camera.width, zoomed_camera.height) == (camera.width, camera.height)

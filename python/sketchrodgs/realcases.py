@@ -9,6 +9,7 @@ Used by `tests/test_real_extraction.py` (which asserts the targets) and `benches
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import zlib
@@ -255,6 +256,16 @@ def overshooting(stroke: np.ndarray, px: float) -> list[np.ndarray]:
         longer[end] = stroke[end] + px * direction / max(float(np.linalg.norm(direction)), 1e-12)
         strokes.append(longer)
     return strokes
+
+
+def zoomed(camera: Camera, stroke: np.ndarray, factor: float) -> tuple[Camera, np.ndarray]:
+    """`camera` zoomed by `factor` (its focal lengths times `factor`) about the centre of `stroke`'s
+    bounding box, which stays where it is on screen, and the stroke as drawn in it: the part seen at
+    `factor` times its pixels, at the same image size (docs/extraction.md, "Resolution")."""
+    centre = (stroke.min(axis=0) + stroke.max(axis=0)) / 2
+    cx, cy = (float(c + (p - c) * factor) for c, p in zip(centre, (camera.cx, camera.cy)))
+    zoomed_camera = dataclasses.replace(camera, fx=camera.fx * factor, fy=camera.fy * factor, cx=cx, cy=cy)
+    return zoomed_camera, centre + (stroke - centre) * factor
 
 
 def end_gap(extraction: Extraction) -> float:
