@@ -581,6 +581,13 @@ def test_stroke_samples_and_extraction(ring):
     assert len(extraction.gaussian_ids) > 1000 and extraction.coverage > 0.9
     with pytest.raises(SketchRodGSError, match="single point"):
         extract(ring, Stroke(camera, [(0.5, 0.5)]), SketchSettings())
+    # the panel's working width is the size traced: at 480 px, not scaled up to extract_rod's 960
+    small = Stroke(camera.resized(480), list(stroke.screen))
+    traced = extract(ring, small, SketchSettings())
+    np.testing.assert_array_equal(
+        traced.polyline, extract_rod(ring, small.camera, small.pixels(), working_width=None).polyline
+    )
+    assert traced.camera.width == 480
 
 
 def test_frame_timings():

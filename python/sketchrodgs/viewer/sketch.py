@@ -101,6 +101,8 @@ def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> E
     """
     if len(stroke.screen) < 2:
         raise SketchRodGSError("the stroke is a single point: drag across the object")
+    # the camera is made at the panel's working width, and traced at it: a user may trade the
+    # extraction's detail for its time (docs/viewer.md)
     return extract_rod(
         scene,
         stroke.camera,
@@ -109,4 +111,5 @@ def extract(scene: GaussianScene, stroke: Stroke, settings: SketchSettings) -> E
         alpha=settings.alpha,
         edge_length=settings.edge_length,
         attach=settings.attach,
+        working_width=stroke.camera.width,
     )
