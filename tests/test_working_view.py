@@ -30,6 +30,16 @@ def stand_leg():
 
 
 @pytest.fixture(scope="module")
+def left_leg_az135():
+    """The left stand leg seen from az135 (a flat bar seen obliquely), as `stand_leg`."""
+    scenes, cases = load_cases(CASES)
+    case = next(c for c in cases if c["name"] == "guitar_stand_leg_left")
+    view = next(v for v in case["views"] if v["name"] == "az135")
+    camera = Camera.from_dict(view["camera"], "az135")
+    return scenes[case["scene"]], case, camera, np.asarray(view["stroke"], np.float64)
+
+
+@pytest.fixture(scope="module")
 def at_960(stand_leg):
     scene, _, camera, stroke = stand_leg
     return extract_rod(scene, camera, stroke)
@@ -53,15 +63,11 @@ def test_the_same_view_at_a_higher_resolution_gives_the_same_rod(stand_leg, at_9
 
 
 @pytest.mark.parametrize("width", [640, 480])
-def test_the_same_view_at_a_lower_resolution_gives_the_same_rod(width):
+def test_the_same_view_at_a_lower_resolution_gives_the_same_rod(left_leg_az135, width):
     """The left stand leg seen from az135: traced at its own size, R came out at 1.57 x R at 640x360
     and 1.60 at 480x270 (1.02 at 960), and the rod 1.6-1.7 R off the 960 view's. Traced on the view
     scaled up to 960, the rod and R are the 960 view's."""
-    scenes, cases = load_cases(CASES)
-    case = next(c for c in cases if c["name"] == "guitar_stand_leg_left")
-    view = next(v for v in case["views"] if v["name"] == "az135")
-    scene, camera = scenes[case["scene"]], Camera.from_dict(view["camera"], "az135")
-    stroke = np.asarray(view["stroke"], np.float64)
+    scene, case, camera, stroke = left_leg_az135
     at_960 = extract_rod(scene, camera, stroke)
     small = camera.resized(width)
     rod = extract_rod(scene, small, stroke * width / 960)
@@ -147,17 +153,13 @@ def test_the_radius_alone_of_a_larger_view_is_measured_at_the_working_width(stan
 
 
 @pytest.mark.parametrize("width", [640, 480])
-def test_the_radius_alone_of_a_smaller_view_is_measured_at_the_working_width(width):
+def test_the_radius_alone_of_a_smaller_view_is_measured_at_the_working_width(left_leg_az135, width):
     """The left stand leg from az135: measured at 640 or 480 px, R came out at 1.57-1.60 x R; sampled
     up to the working width (each working pixel the user's pixel under it) it is within 2 % of the
     960 view's (1.02 R)."""
     from sketchrodgs.extract import estimate_radius
 
-    scenes, cases = load_cases(CASES)
-    case = next(c for c in cases if c["name"] == "guitar_stand_leg_left")
-    view = next(v for v in case["views"] if v["name"] == "az135")
-    scene, camera = scenes[case["scene"]], Camera.from_dict(view["camera"], "az135")
-    stroke = np.asarray(view["stroke"], np.float64)
+    scene, _, camera, stroke = left_leg_az135
     at_960 = estimate_radius(render(scene, camera, outputs=("index", "solid")), camera, stroke)
     small = camera.resized(width)
     measured = estimate_radius(render(scene, small, outputs=("index", "solid")), small, stroke * width / 960)
