@@ -6,7 +6,7 @@ a rod that comes out shorter (the distances count only where the rods overlap). 
 a minute (docs/extraction.md, "A pixel's shift").
 
     python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F]
-        [--sideways K | --overshoot PX | --zoom F]
+        [--sideways K | --overshoot PX | --zoom F | --diameters K]
 
 Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
 its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `--save F` writes
@@ -17,7 +17,9 @@ normal at each point, R at the rod's median depth): a stroke drawn along the par
 then its last, PX pixels further along its end's direction: a stroke drawn on past the part's end.
 `--zoom F` draws each stroke in its camera zoomed in by F and out by F about the stroke's centre: the
 part at F times and 1/F times its pixels, at the same image size (docs/extraction.md, "Resolution");
-a stroke zoomed in past the image's edge is left out.
+a stroke zoomed in past the image's edge is left out. `--diameters K` draws a stroke K diameters
+long along the rod as drawn, where it is seen, nearest its middle (`realcases.short_stroke`): the
+issue's short stroke (docs/extraction.md, "Radius").
 """
 
 from __future__ import annotations
@@ -74,10 +76,11 @@ def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[s
     }
 
 
-def score(job: tuple[str, int, float, float, float]) -> list[dict]:
+def score(job: tuple[str, int, float, float, float, float]) -> list[dict]:
     """The views of one case of the file `job[0]`, by index `job[1]`, shifted by a pixel or, where
     `job[2]` is not 0, moved sideways by that many R, where `job[3]` is not 0, with each end carried
-    that many pixels on, or where `job[4]` is not 0, zoomed in and out by that factor."""
+    that many pixels on, where `job[4]` is not 0, zoomed in and out by that factor, or where `job[5]`
+    is not 0, drawn that many diameters long."""
     scenes, cases = realcases.load_cases(DATA / job[0])
     case = cases[job[1]]
     scene, radius = scenes[case["scene"]], float(case["radius"])
@@ -86,8 +89,12 @@ def score(job: tuple[str, int, float, float, float]) -> list[dict]:
         camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
         stroke = np.asarray(view["stroke"], np.float64)
         images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
-        if job[2]:
+        if job[2] or job[5]:
             rod = extract_rod(scene, camera, stroke, radius=radius, render=images).polyline
+        if job[5]:
+            short = realcases.short_stroke(camera, rod, radius, job[5], images)
+            moved = [] if short is None else [(camera, short, images)]
+        elif job[2]:
             moved = [(camera, s, images) for s in realcases.sideways(stroke, camera, rod, radius, job[2])]
         elif job[3]:
             moved = [(camera, s, images) for s in realcases.overshooting(stroke, job[3])]
@@ -123,9 +130,10 @@ def main() -> None:
     parser.add_argument("--sideways", type=float, default=0.0, help="move each stroke this many R to either side")
     parser.add_argument("--overshoot", type=float, default=0.0, help="carry each stroke's ends this many px on")
     parser.add_argument("--zoom", type=float, default=0.0, help="zoom each view in and out by this factor (> 1)")
+    parser.add_argument("--diameters", type=float, default=0.0, help="a stroke this many diameters long instead")
     args = parser.parse_args()
-    if (args.sideways != 0) + (args.overshoot != 0) + (args.zoom != 0) > 1:
-        parser.error("--sideways, --overshoot and --zoom measure one at a time")
+    if (args.sideways != 0) + (args.overshoot != 0) + (args.zoom != 0) + (args.diameters != 0) > 1:
+        parser.error("--sideways, --overshoot, --zoom and --diameters measure one at a time")
     if args.zoom and not args.zoom > 1:
         parser.error(f"--zoom: a factor over 1, got {args.zoom:g}")
     how = (
@@ -135,6 +143,8 @@ def main() -> None:
         if args.overshoot
         else f"zoomed {args.zoom:g} x in and out"
         if args.zoom
+        else f"drawn {args.diameters:g} diameters long"
+        if args.diameters
         else "shifted by a pixel"
     )
     every = []
@@ -143,7 +153,7 @@ def main() -> None:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
             jobs = [
-                (file, k, args.sideways, args.overshoot, args.zoom)
+                (file, k, args.sideways, args.overshoot, args.zoom, args.diameters)
                 for k, case in enumerate(cases)
                 if args.only in case["name"]
             ]

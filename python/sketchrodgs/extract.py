@@ -572,25 +572,46 @@ def _trace(
         points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
         return trace, pixel_path, path_ids, points
 
+    def long_enough(points: np.ndarray, pixel_path: list[np.ndarray], radius: float) -> bool:
+        """Whether the path makes a rod two diameters long: its Gaussians' centres, or where the part
+        is a few big Gaussians whose centres lie closer together than its ends, its pixels."""
+        found = pl.polyline_length(points) if len(points) > 1 else 0.0
+        return found >= 2 * radius or _path_length_on_screen(pixel_path, depth, focal) >= 2 * radius
+
     trace, pixel_path, path_ids, points = trace_path(radius)
     found = pl.polyline_length(points) if len(points) > 1 else 0.0
-    if estimated and 0 < found < 2 * radius:
+    if estimated and found > 0 and not long_enough(points, pixel_path, radius):
         # A rod is at least two diameters long, so an estimate that makes the part shorter than that
-        # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length.
+        # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length
+        # (docs/extraction.md, "Radius").
         radius = found / 4
         trace, pixel_path, path_ids, points = trace_path(radius)
     if estimated and trace.colours is not None:
         # on a surface of another colour, the part's width is where its colour ends; an answer far
-        # off the estimate (a few pixels of the part's colour) or a trace that then fails keeps it
+        # off the estimate (a few pixels of the part's colour) or a trace that then fails or is too
+        # short for a rod keeps it
         by_colour = _radius_by_colour(scene, index, depth, opacity, trace, focal)
         if by_colour is not None and 0.25 * radius <= by_colour <= 4 * radius:
             try:
-                trace, pixel_path, path_ids, points = trace_path(by_colour)
-                radius = by_colour
+                again = trace_path(by_colour)
+                if long_enough(again[3], again[1], by_colour):
+                    trace, pixel_path, path_ids, points = again
+                    radius = by_colour
             except PathNotFoundError:
                 pass
     timings["path_search"] = time.perf_counter() - clock
     return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
+
+
+def _path_length_on_screen(pixel_path: list[np.ndarray], depth: np.ndarray, focal: float) -> float:
+    """The pixel path's length in world units at its median depth (its pieces' lengths summed)."""
+    pixels = np.concatenate(pixel_path)
+    depths = depth[pixels[:, 1], pixels[:, 0]]
+    depths = depths[np.isfinite(depths) & (depths > 0)]
+    if len(depths) == 0:
+        return 0.0
+    px = sum(pl.polyline_length(piece.astype(np.float64)) for piece in pixel_path if len(piece) > 1)
+    return float(px * np.median(depths) / focal)
 
 
 def _off_occluders_at_breaks(
