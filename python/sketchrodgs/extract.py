@@ -593,9 +593,9 @@ def _trace(
         by_colour = _radius_by_colour(scene, index, depth, opacity, trace, focal)
         if by_colour is not None and 0.25 * radius <= by_colour <= 4 * radius:
             try:
-                again = trace_path(by_colour)
-                if long_enough(again[3], again[1], by_colour):
-                    trace, pixel_path, path_ids, points = again
+                again, again_pixels, again_ids, again_points = trace_path(by_colour)
+                if long_enough(again_points, again_pixels, by_colour):
+                    trace, pixel_path, path_ids, points = again, again_pixels, again_ids, again_points
                     radius = by_colour
             except PathNotFoundError:
                 pass
