@@ -268,7 +268,7 @@ def short_stroke(
     part a rod was found for (docs/extraction.md, "Radius")."""
     uv, z = camera.project(np.asarray(rod, np.float64))
     half = diameters * radius * camera.fx / float(np.median(z))
-    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(uv, axis=0), axis=1))]
+    arc = pl.arc_lengths(uv)
     depth = images.index_depth_image
 
     def along(at: np.ndarray) -> np.ndarray:
@@ -379,7 +379,7 @@ def stroke_along(camera: Camera, polyline: np.ndarray, rng: np.random.Generator)
     """A stroke a user might draw along `polyline` seen by `camera`: a point every
     `TURNED_STROKE_SPACING_PX` of its projection with hand noise, both ends overshooting."""
     uv, _ = camera.project(np.asarray(polyline, np.float64))
-    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(uv, axis=0), axis=1))]
+    arc = pl.arc_lengths(uv)
     at = np.r_[np.arange(0.0, arc[-1], TURNED_STROKE_SPACING_PX), arc[-1]]
     points = np.column_stack([np.interp(at, arc, uv[:, 0]), np.interp(at, arc, uv[:, 1])])
     points += rng.normal(0.0, TURNED_STROKE_NOISE_PX, points.shape)

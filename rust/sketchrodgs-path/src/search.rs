@@ -716,21 +716,19 @@ mod tests {
         // a stroke along a blue sprinkle's edge: 40 % of the colours near it are the sprinkle's,
         // the rest the icing's two shades (0.22 apart, less than two colours must be); the 2-means
         // from the median and that of those off it split the shades, and found no colours
-        let (blue, pink, light) = ([0.2, 0.49, 0.78], [0.79, 0.55, 0.75], [0.84, 0.76, 0.81]);
-        let mix = |shares: [usize; 3]| -> Vec<[f32; 3]> {
-            [blue, pink, light].iter().zip(shares).flat_map(|(&c, n)| std::iter::repeat_n(c, n)).collect()
+        let mix = |palette: [[f32; 3]; 3], shares: [usize; 3]| -> Vec<[f32; 3]> {
+            palette.iter().zip(shares).flat_map(|(&c, n)| std::iter::repeat_n(c, n)).collect()
         };
-        let colours = two_colours(&mix([40, 30, 30]), &mix([0, 55, 45])).unwrap();
+        let (blue, pink, light) = ([0.2, 0.49, 0.78], [0.79, 0.55, 0.75], [0.84, 0.76, 0.81]);
+        let icing = [blue, pink, light];
+        let colours = two_colours(&mix(icing, [40, 30, 30]), &mix(icing, [0, 55, 45])).unwrap();
         assert!(
             colour_distance(colours.part, blue) < 0.01 && colours.is_surround(pink) && colours.is_surround(light),
             "{colours:?}"
         );
         // but a few highlights on a part of two dark shades are no part of their own
-        let (dark, shade, lit) = ([0.13, 0.08, 0.06], [0.25, 0.2, 0.15], [0.45, 0.51, 0.38]);
-        let paint = |shares: [usize; 3]| -> Vec<[f32; 3]> {
-            [dark, shade, lit].iter().zip(shares).flat_map(|(&c, n)| std::iter::repeat_n(c, n)).collect()
-        };
-        assert_eq!(two_colours(&paint([50, 40, 10]), &paint([60, 38, 2])), None);
+        let paint = [[0.13, 0.08, 0.06], [0.25, 0.2, 0.15], [0.45, 0.51, 0.38]];
+        assert_eq!(two_colours(&mix(paint, [50, 40, 10]), &mix(paint, [60, 38, 2])), None);
     }
 
     #[test]
