@@ -10,9 +10,9 @@ about 25 s; `benches/bench_extract.py` prints every figure.
 estimates outside the radius target, rods folding back, and the views seen over 80 % whose rod
 (R given) lies over 1.5 R from its source view's rod, with the log of that excess. `--save F`
 writes each view's figures to F (JSON); `--against F` lists the views that moved since F was saved,
-so that a change is judged on them as on the cases (docs/extraction.md, "Turned views"). `--draws N`
+so that a change is judged on them as on the cases (docs/real_captures.md, "Turned views"). `--draws N`
 also scores N draws of jittered strokes per case (the first is the one above) and prints how many
-meet the jitter targets (docs/extraction.md, "A pixel's shift").
+meet the jitter targets (docs/real_captures.md, "A pixel's shift").
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ by each of the 8 offsets of up to 1 px in x and y, extracted with R given and wi
 compared with the stroke as drawn. A user never draws the same stroke twice to the pixel, and the
 issue's jitter (3-8 px of noise, R given) does not show what a pixel does to the radius estimate, nor
 a rod that comes out shorter (the distances count only where the rods overlap). Both cores, about
-a minute (docs/extraction.md, "A pixel's shift").
+a minute (docs/real_captures.md, "A pixel's shift").
 
     python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F]
         [--sideways K | --overshoot PX | --zoom F | --diameters K]
@@ -13,7 +13,7 @@ its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `-
 every view's figures to F (JSON); `--against F` lists the views whose figures moved since F.
 `--sideways K` moves each stroke sideways instead, by K times R on screen to either side (along its
 normal at each point, R at the rod's median depth): a stroke drawn along the part's edge
-(docs/extraction.md, "Drawn along an edge"). `--overshoot PX` carries each stroke's first point,
+(docs/real_captures.md, "Drawn along an edge"). `--overshoot PX` carries each stroke's first point,
 then its last, PX pixels further along its end's direction: a stroke drawn on past the part's end.
 `--zoom F` draws each stroke in its camera zoomed in by F and out by F about the stroke's centre: the
 part at F times and 1/F times its pixels, at the same image size (docs/extraction.md, "Resolution");

@@ -1,6 +1,6 @@
 """Write tests/data/real_cases/sprinkle_cases.json: 18 more sprinkles of the donut capture, each in
 the 2-3 views of the donut cases' cameras where it shows whole, with strokes made from what the
-image shows, not from any extraction (docs/extraction.md, "Sprinkles from their colour").
+image shows, not from any extraction (docs/real_captures.md, "Sprinkles from their colour").
 
 Each sprinkle is a blue blob of the rendered image (blue minus red over 0.2): one not touching the
 image's edge, at least 200 pixels, elongated (length over width at least 3) and convex (it fills at

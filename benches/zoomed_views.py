@@ -2,7 +2,7 @@
 moved towards its stroke's middle to `--fraction` of the distance (same orientation, same
 intrinsics), the stroke's points as drawn unprojected at the rod's depth and projected again. Prints,
 per view, R estimated against the case's R and how far the rod lies from the unzoomed view's (R
-given), in R (docs/extraction.md, "Zoomed in: the depth gap of the widths is in pixels").
+given), in R (docs/real_captures.md, "Zoomed in: the depth gap of the widths is in pixels").
 
     python benches/zoomed_views.py [--fraction 0.5]
 """

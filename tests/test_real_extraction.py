@@ -7,7 +7,7 @@ stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
 What holds on every case is asserted outright. The per-case geometric targets are asserted per
 case; where a case does not meet a target yet it is marked xfail(strict): the test then fails the
 day the case starts to pass, so that the list stays true. The lists are what we measured; the
-reasons are in docs/extraction.md ("Where it still fails").
+reasons are in docs/real_captures.md.
 """
 
 from __future__ import annotations
@@ -138,7 +138,7 @@ def _strokes_that_fail(group: str, moved, radius_given: bool) -> list[str]:
 def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
     """Every view's stroke moved by a pixel left, right, up or down gives a rod with R estimated,
     where the radius estimate and the depth chain decide most (benches/real_case_shifts.py measures
-    how far such rods move; docs/extraction.md, "A pixel's shift")."""
+    how far such rods move; docs/real_captures.md, "A pixel's shift")."""
     offsets = ((-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0))
     failed = _strokes_that_fail(group, lambda scene, case, camera, stroke, images: [stroke + o for o in offsets], False)
     assert not failed, failed
@@ -148,7 +148,7 @@ def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
 def test_a_stroke_half_a_radius_off_the_middle_still_gives_a_rod(group):
     """Every view's stroke moved half R aside, either way (`realcases.sideways`), gives a rod with R
     given and estimated: users draw off a part's middle (benches/real_case_shifts.py --sideways
-    measures how far such rods move; docs/extraction.md, "Drawn along an edge")."""
+    measures how far such rods move; docs/real_captures.md, "Drawn along an edge")."""
 
     def aside(scene, case, camera, stroke, images):
         drawn = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
@@ -316,7 +316,7 @@ def test_a_petiole_stroke_shifted_by_a_pixel_keeps_its_length():
     stroke shifted by (-1, +1) px had the first 45 % cut as a turn off the part: the turn's apex
     was the bottom's member nearest the stroke's start, which made that side the shorter one, and
     the rod came out at 10.4 R against 25.5 as drawn. The sides are compared beyond the bottom
-    (docs/extraction.md, "Stroke clean-up" 6, and "A pixel's shift")."""
+    (docs/extraction.md, "Stroke clean-up" 6, and docs/real_captures.md, "A pixel's shift")."""
     scene, case, camera, stroke = _case_view("heldout", "plant_petiole_right", "az000")
     lengths = [
         polyline_length(extract_rod(scene, camera, s, radius=case["radius"]).polyline)
@@ -343,7 +343,7 @@ def test_a_stroke_drawn_30_px_past_either_end_still_gives_a_rod(group):
     """Every view's stroke with its first or its last point carried 30 px on along its end's
     direction (`realcases.overshooting`: the issue's overshoots run 10-30 px onto the background or
     a neighbour) gives a rod, R given and estimated: the stroke is trimmed to where it meets the
-    part, not refused (docs/extraction.md, "Drawn on past an end")."""
+    part, not refused (docs/real_captures.md, "Drawn on past an end")."""
     failed = _strokes_that_fail(group, lambda scene, case, camera, stroke, images: overshooting(stroke, 30.0), True)
     assert not failed, failed
 
@@ -353,7 +353,7 @@ def test_a_stroke_drawn_30_px_past_either_end_still_gives_a_rod(group):
     [("sprinkles", "sprinkle_15", "az270", 0.7, 0, True), ("heldout", "tree_finger_far_left", "az315", 1.0, 0, False)],
 )
 def test_a_stroke_drawn_along_the_parts_edge_gives_its_rod(group, name, view, k, side, radius_given):
-    """A stroke drawn along one side of the part (`realcases.sideways`, docs/extraction.md, "Drawn
+    """A stroke drawn along one side of the part (`realcases.sideways`, docs/real_captures.md, "Drawn
     along an edge"): sprinkle_15's along its edge, 0.7 R aside, found no colours (the icing's two
     shades split first) and its path ran over the icing's edge, one big Gaussian: refused as too
     short. A tree finger's on its silhouette, a pixel outside it, with R estimated, had no covered
@@ -370,7 +370,7 @@ def test_a_stroke_along_a_sprinkles_edge_that_fails_says_to_draw_along_its_middl
     """sprinkle_01 in az180 stroked along its edge, 0.7 R aside: the path runs 120 px over the
     icing's edge, which one big icing Gaussian owns, and no rod can be made. The error says what to
     change: not a longer stroke or a smaller radius, but the stroke along the middle
-    (docs/extraction.md, "Drawn along an edge"); the viewer says it in the user's terms."""
+    (docs/real_captures.md, "Drawn along an edge"); the viewer says it in the user's terms."""
     scene, case, camera, stroke = _case_view("sprinkles", "sprinkle_01", "az180")
     drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
     moved = sideways(stroke, camera, drawn.polyline, case["radius"], 0.7)[0]

@@ -4,7 +4,7 @@ case's rod seen from cameras turned about it by 20-60 degrees, with a stroke alo
 a user's own view brings. Per view: extraction works with R given and estimated, the estimate is
 within the issue's 0.7-1.4 x R, and no rod folds back along its stroke. Where a view does not meet
 a target yet it is marked xfail(strict), so the lists stay true; the reasons are in
-docs/extraction.md ("Turned views").
+docs/real_captures.md ("Turned views").
 """
 
 from __future__ import annotations

@@ -413,7 +413,7 @@ def _extract(
         path_px = sum(len(p.pixels) for p in pieces)
         # a long path on under two of the part's Gaussians ran over what the part lies on or
         # touches, one big Gaussian owning its pixels: the stroke lay along the part's edge
-        # (docs/extraction.md, "Drawn along an edge")
+        # (docs/real_captures.md, "Drawn along an edge")
         what = (
             f"draw the stroke along the object's middle, not its edge (the path ran {path_px} px over what it lies on)"
             if len(path_ids) < 2 and path_px >= _EDGE_PATH_PX
@@ -804,7 +804,7 @@ def _near_the_path(path: cKDTree, ids: np.ndarray, means: np.ndarray, camera: Ca
     it. Where that keeps fewer than half the Gaussians within 2 R (a part of few Gaussians, a
     sprinkle seen edge-on), those are kept. None farther is ever kept: over one sprinkle a faint
     icing Gaussian 13 R long owned 101 of the path's 119 pixels, its centre 400 px off, and the rod
-    ran there (docs/extraction.md, "Sprinkles from their colour"); too few left makes the rod too
+    ran there (docs/real_captures.md, "Sprinkles from their colour"); too few left makes the rod too
     short, a clear error."""
     _, first = np.unique(ids, return_index=True)
     ids = ids[np.sort(first)]  # first visit of each Gaussian, in path order

@@ -48,7 +48,7 @@ TARGETS = {
     # ours: no rod folds back along its stroke by more than this (a loop at a node, a hook at an end)
     "fold_back": 2.5,
     # ours: each rod as drawn is at least this share of its stroke's length on screen; end_gap
-    # measures against the path, which is cut where the stroke is (docs/extraction.md, "Parts seen
+    # measures against the path, which is cut where the stroke is (docs/real_captures.md, "Parts seen
     # from new views": a foot cut at the leg in front of it covered 42 % of its stroke)
     "stroke_share": 0.5,
 }
@@ -135,7 +135,7 @@ class CaseScore:
     def log_excess(self) -> float:
         """The sum, over the issue's distance targets this case misses (views with R given and
         estimated, reversed, jitter), of ln(measured / target): how far it is from meeting them,
-        the figure changes to extraction are compared by (docs/extraction.md, "Measured on real
+        the figure changes to extraction are compared by (docs/real_captures.md, "Measured on real
         captures"). inf where such a distance is not measurable (two rods that do not overlap)."""
         t = TARGETS
         pairs = [
@@ -238,7 +238,7 @@ def score_case(case: dict[str, Any], views: list[ViewResult]) -> CaseScore:
 def sideways(stroke: np.ndarray, camera: Camera, rod: np.ndarray, radius: float, k: float) -> list[np.ndarray]:
     """`stroke` moved by `k` times `radius` on screen to either side, along its normal at each
     point, the radius taken on screen at the median depth of `rod` (a stroke drawn along one side of
-    the part: docs/extraction.md, "Drawn along an edge")."""
+    the part: docs/real_captures.md, "Drawn along an edge")."""
     radius_px = radius * camera.fx / float(np.median(camera.project(np.asarray(rod, np.float64))[1]))
     tangent = np.gradient(stroke, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
@@ -248,7 +248,7 @@ def sideways(stroke: np.ndarray, camera: Camera, rod: np.ndarray, radius: float,
 
 def overshooting(stroke: np.ndarray, px: float) -> list[np.ndarray]:
     """`stroke` with its first point, then its last, carried `px` pixels further along its end's
-    direction: a stroke drawn on past the part's end (docs/extraction.md, "Drawn along an edge")."""
+    direction: a stroke drawn on past the part's end (docs/real_captures.md, "Drawn along an edge")."""
     strokes = []
     for end, before in ((0, 1), (-1, -2)):
         direction = stroke[end] - stroke[before]
