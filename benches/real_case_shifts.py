@@ -29,6 +29,7 @@ import json
 import time
 from multiprocessing import Pool
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -76,30 +77,38 @@ def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[s
     }
 
 
-def score(job: tuple[str, int, float, float, float, float]) -> list[dict]:
-    """The views of one case of the file `job[0]`, by index `job[1]`, shifted by a pixel or, where
-    `job[2]` is not 0, moved sideways by that many R, where `job[3]` is not 0, with each end carried
-    that many pixels on, where `job[4]` is not 0, zoomed in and out by that factor, or where `job[5]`
-    is not 0, drawn that many diameters long."""
-    scenes, cases = realcases.load_cases(DATA / job[0])
-    case = cases[job[1]]
+class Job(NamedTuple):
+    """One case's views to score: shifted by a pixel, or moved as the one non-zero measure says."""
+
+    file: str
+    index: int  # of the case in the file
+    sideways: float  # R to either side
+    overshoot: float  # px each end is carried on
+    zoom: float  # factor zoomed in and out
+    diameters: float  # the stroke's length
+
+
+def score(job: Job) -> list[dict]:
+    """The views of one case, shifted by a pixel or moved as `job` says."""
+    scenes, cases = realcases.load_cases(DATA / job.file)
+    case = cases[job.index]
     scene, radius = scenes[case["scene"]], float(case["radius"])
     rows = []
     for view in case["views"]:
         camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
         stroke = np.asarray(view["stroke"], np.float64)
         images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
-        if job[2] or job[5]:
+        if job.sideways or job.diameters:
             rod = extract_rod(scene, camera, stroke, radius=radius, render=images).polyline
-        if job[5]:
-            short = realcases.short_stroke(camera, rod, radius, job[5], images)
+        if job.diameters:
+            short = realcases.short_stroke(camera, rod, radius, job.diameters, images)
             moved = [] if short is None else [(camera, short, images)]
-        elif job[2]:
-            moved = [(camera, s, images) for s in realcases.sideways(stroke, camera, rod, radius, job[2])]
-        elif job[3]:
-            moved = [(camera, s, images) for s in realcases.overshooting(stroke, job[3])]
-        elif job[4]:
-            zoomed = [realcases.zoomed(camera, stroke, f) for f in (job[4], 1 / job[4])]
+        elif job.sideways:
+            moved = [(camera, s, images) for s in realcases.sideways(stroke, camera, rod, radius, job.sideways)]
+        elif job.overshoot:
+            moved = [(camera, s, images) for s in realcases.overshooting(stroke, job.overshoot)]
+        elif job.zoom:
+            zoomed = [realcases.zoomed(camera, stroke, f) for f in (job.zoom, 1 / job.zoom)]
             # (a stroke zoomed in past the image's edge would give a shorter rod for that alone)
             moved = [(c, s, None) for c, s in zoomed if (s >= 0).all() and (s < [c.width, c.height]).all()]
         else:
@@ -132,28 +141,24 @@ def main() -> None:
     parser.add_argument("--zoom", type=float, default=0.0, help="zoom each view in and out by this factor (> 1)")
     parser.add_argument("--diameters", type=float, default=0.0, help="a stroke this many diameters long instead")
     args = parser.parse_args()
-    if (args.sideways != 0) + (args.overshoot != 0) + (args.zoom != 0) + (args.diameters != 0) > 1:
+    measures = [
+        (args.sideways, f"moved {args.sideways:g} R to either side"),
+        (args.overshoot, f"with an end carried {args.overshoot:g} px on"),
+        (args.zoom, f"zoomed {args.zoom:g} x in and out"),
+        (args.diameters, f"drawn {args.diameters:g} diameters long"),
+    ]
+    if sum(value != 0 for value, _ in measures) > 1:
         parser.error("--sideways, --overshoot, --zoom and --diameters measure one at a time")
     if args.zoom and not args.zoom > 1:
         parser.error(f"--zoom: a factor over 1, got {args.zoom:g}")
-    how = (
-        f"moved {args.sideways:g} R to either side"
-        if args.sideways
-        else f"with an end carried {args.overshoot:g} px on"
-        if args.overshoot
-        else f"zoomed {args.zoom:g} x in and out"
-        if args.zoom
-        else f"drawn {args.diameters:g} diameters long"
-        if args.diameters
-        else "shifted by a pixel"
-    )
+    how = next((text for value, text in measures if value), "shifted by a pixel")
     every = []
     with Pool(2) as pool:
         for file, what in SETS:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
             jobs = [
-                (file, k, args.sideways, args.overshoot, args.zoom, args.diameters)
+                Job(file, k, args.sideways, args.overshoot, args.zoom, args.diameters)
                 for k, case in enumerate(cases)
                 if args.only in case["name"]
             ]

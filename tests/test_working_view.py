@@ -18,25 +18,25 @@ from sketchrodgs.working_view import WORKING_WIDTH, WorkingView
 CASES = Path(__file__).parent / "data" / "real_cases" / "cases.json"
 
 
+def _case_view(name: str, view_name: str):
+    """The scene, the case, the camera (960x540) and the stroke as drawn of one view of a case."""
+    scenes, cases = load_cases(CASES)
+    case = next(c for c in cases if c["name"] == name)
+    view = next(v for v in case["views"] if v["name"] == view_name)
+    return scenes[case["scene"]], case, Camera.from_dict(view["camera"], view_name), np.asarray(view["stroke"], float)
+
+
 @pytest.fixture(scope="module")
 def stand_leg():
     """The right stand leg seen from az090 (a flat bar: its depths across it scatter by a few pixels'
-    world size at 960 px), its camera at 960x540 and its stroke as drawn."""
-    scenes, cases = load_cases(CASES)
-    case = next(c for c in cases if c["name"] == "guitar_stand_leg_right")
-    view = next(v for v in case["views"] if v["name"] == "az090")
-    camera = Camera.from_dict(view["camera"], "az090")
-    return scenes[case["scene"]], case, camera, np.asarray(view["stroke"], np.float64)
+    world size at 960 px)."""
+    return _case_view("guitar_stand_leg_right", "az090")
 
 
 @pytest.fixture(scope="module")
 def left_leg_az135():
-    """The left stand leg seen from az135 (a flat bar seen obliquely), as `stand_leg`."""
-    scenes, cases = load_cases(CASES)
-    case = next(c for c in cases if c["name"] == "guitar_stand_leg_left")
-    view = next(v for v in case["views"] if v["name"] == "az135")
-    camera = Camera.from_dict(view["camera"], "az135")
-    return scenes[case["scene"]], case, camera, np.asarray(view["stroke"], np.float64)
+    """The left stand leg seen from az135 (a flat bar seen obliquely)."""
+    return _case_view("guitar_stand_leg_left", "az135")
 
 
 @pytest.fixture(scope="module")

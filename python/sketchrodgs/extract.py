@@ -572,14 +572,16 @@ def _trace(
         points = pl.laplacian_smooth(scene.means[path_ids].astype(np.float64), 3)
         return trace, pixel_path, path_ids, points
 
+    def length(points: np.ndarray) -> float:
+        return pl.polyline_length(points) if len(points) > 1 else 0.0
+
     def long_enough(points: np.ndarray, pixel_path: list[np.ndarray], radius: float) -> bool:
         """Whether the path makes a rod two diameters long: its Gaussians' centres, or where the part
         is a few big Gaussians whose centres lie closer together than its ends, its pixels."""
-        found = pl.polyline_length(points) if len(points) > 1 else 0.0
-        return found >= 2 * radius or _path_length_on_screen(pixel_path, depth, focal) >= 2 * radius
+        return length(points) >= 2 * radius or _path_length_on_screen(pixel_path, depth, focal) >= 2 * radius
 
     trace, pixel_path, path_ids, points = trace_path(radius)
-    found = pl.polyline_length(points) if len(points) > 1 else 0.0
+    found = length(points)
     if estimated and found > 0 and not long_enough(points, pixel_path, radius):
         # A rod is at least two diameters long, so an estimate that makes the part shorter than that
         # took in what the part lies on (a sprinkle on the icing): trace again at a quarter its length
