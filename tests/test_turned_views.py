@@ -31,12 +31,8 @@ RADIUS_MISSES = {
     # the stem thin against leaves and sky, seen from below or above
     "plant_side_stem_right/az315/pitch+20",
     "plant_side_stem_right/az315/pitch-20",
-    # flat bars: seen turned, their narrow side
-    "guitar_stand_leg_left/az090/pitch+20",
+    # a flat bar seen turned from below, its narrow side
     "guitar_stand_leg_left/az090/pitch-20",
-    "guitar_stand_leg_right/az045/yaw+60",
-    "guitar_stand_leg_right/az090/yaw+30",
-    "guitar_stand_leg_right/az090/pitch-20",
     # half hidden by the trunk or another branch
     "tree_twig_v/az000/yaw+60",
     "tree_branch_centre/az000/yaw+30",

@@ -927,7 +927,10 @@ def estimate_radius(render: RenderResult, camera: Camera, stroke: np.ndarray, ba
     """R from the object's visible width under `stroke` (docs/extraction.md, "Radius"): half the
     width of the surface across the stroke, where it stays solid (alpha >= 0.5) and its depth does
     not jump, in world units at its depth; the median over the stroke's samples on the object. A
-    view of another width is measured scaled to `WORKING_WIDTH`, as `extract_rod` traces it."""
+    view of another width is measured scaled to `WORKING_WIDTH`, as `extract_rod` traces it.
+    Without the scene it has no colours, which `extract_rod`'s estimate also uses: a part lying on
+    a surface at its own depth, and a flat bar whose faces step in depth, measure as they look in
+    depth alone (docs/extraction.md, "Radius", A flat bar's faces)."""
     stroke = _check_stroke(stroke)
     _check_render_size(render, camera)
     view = WorkingView.of(camera)

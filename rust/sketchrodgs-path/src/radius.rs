@@ -43,6 +43,15 @@ const COLOUR_OFF_LEAST: f32 = 0.2;
 /// threshold from 3 to 10 R gives the same real-capture numbers).
 const OUTLINED_SHARE: f32 = 0.5;
 const OUTLINED_BEHIND_R: f32 = 6.0;
+/// A walk outlined in the part's colour on both sides is the part from silhouette to silhouette,
+/// though its depths split in clusters: a flat bar seen obliquely shows two faces, and the centres
+/// of their big Gaussians, which give the pixels' depths, lie more than the 8 px floor apart
+/// (a stand leg's widths fell in two groups, 0.08-0.52 and 0.62-1.14 `R`). That width counts where
+/// it is at most this many times the cluster's: a same-coloured surface outlined with the part (a
+/// leaf behind a stem) is often wider. At 2 both stand legs' views stayed 1.50-1.56 x
+/// apart; at 4, or without a bound, 10 and 9 of the turned views came out outside 0.7-1.4 x `R`
+/// instead of 7 (docs/extraction.md, "Radius", A flat bar's faces).
+const OUTLINE_RATIO: usize = 3;
 
 /// What [`estimate_radius`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -79,7 +88,7 @@ pub fn estimate_radius(
         // within the band (the search reaches the part from there too)
         under = loose.points.iter().map(|&p| nearest_covered(image, p, band_px)).collect();
     }
-    let (first, _) = half_widths(image, &loose, &under, focal, max_px, None);
+    let (first, _) = half_widths(image, &loose, &under, focal, max_px, None, None);
     let gap_at = |r: f32| crate::depth_gap(image, stroke, r, focal);
     let Some(rough) = slender_cluster(&first, gap_at) else { return Err(PathError::StrokeOnBackground) };
     // pass 2: the depth-consistent chain at that radius
@@ -112,12 +121,12 @@ pub fn estimate_radius(
     // the part's colour, where the Gaussians' colours are known: the median at the anchors
     let colour = part_colour(image, &anchors);
     let median_width = |widths: Vec<[f32; 2]>| median(&mut widths.iter().map(|w| w[0]).collect::<Vec<f32>>());
-    let (widths, behind) = half_widths(image, &clean, &anchors, focal, max_px, None);
+    let (widths, behind) = half_widths(image, &clean, &anchors, focal, max_px, None, colour);
     let mut radius = if widths.is_empty() { rough } else { median_width(widths) };
     let outlined = behind.iter().filter(|&&b| b > OUTLINED_BEHIND_R * radius).count();
     let outlined_share = outlined as f32 / behind.len().max(1) as f32;
     if let Some(colour) = colour.filter(|_| outlined_share < OUTLINED_SHARE) {
-        let (in_colour, _) = half_widths(image, &clean, &anchors, focal, max_px, Some(colour));
+        let (in_colour, _) = half_widths(image, &clean, &anchors, focal, max_px, Some(colour), None);
         let by_colour = if in_colour.is_empty() { radius } else { median_width(in_colour) };
         if radius > COLOUR_RATIO * by_colour {
             radius = by_colour;
@@ -146,7 +155,9 @@ fn nearest_covered(image: &IndexImage, point: [f32; 2], reach: f32) -> Option<us
 
 /// The half-widths in world units at the samples that have a pixel (walks stopping where the
 /// colour is off `colour`, if given), each with that pixel's depth, and for each how far behind
-/// the part its walk's silhouette lies on both sides (`Walks::outlined_behind`).
+/// the part its walk's silhouette lies on both sides (`Walks::outlined_behind`). With `outline`
+/// (the part's colour), a walk outlined in that colour takes its width between the silhouettes
+/// where that is at most `OUTLINE_RATIO` times its depth cluster's (`Walks::outline_width`).
 fn half_widths(
     image: &IndexImage,
     stroke: &CleanStroke,
@@ -154,6 +165,7 @@ fn half_widths(
     focal: f32,
     max_px: usize,
     colour: Option<([f32; 3], f32)>,
+    outline: Option<([f32; 3], f32)>,
 ) -> (Vec<[f32; 2]>, Vec<f32>) {
     let mut walks = Walks::default();
     let mut behind = Vec::new();
@@ -162,7 +174,12 @@ fn half_widths(
         .zip(&stroke.normal)
         .filter_map(|(p, n)| p.filter(|_| n != &[0.0, 0.0]).map(|p| (p, n)))
         .map(|(p, &n)| {
-            let width = walks.cross_width(image, p, n, focal, max_px, colour);
+            let mut width = walks.cross_width(image, p, n, focal, max_px, colour);
+            if let Some(outlined) = outline.and_then(|c| walks.outline_width(image, c))
+                && outlined <= OUTLINE_RATIO * width
+            {
+                width = width.max(outlined);
+            }
             behind.push(walks.outlined_behind());
             let z = image.depth(p);
             [0.5 * width as f32 * z / focal, z]

@@ -515,6 +515,54 @@ fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
 }
 
 #[test]
+fn the_radius_of_a_bar_showing_two_faces_is_the_whole_bars_where_its_colour_outlines_it() {
+    // A bar 18 px wide against nothing: a face of 7 px (rows 11..=17) 12 px of world size nearer
+    // than the other, of 11 px (rows 18..=28), as the centres of a real bar's big Gaussians step
+    // between its faces. The depths split in two clusters at the 8 px floor; the stroke runs along
+    // the wider face.
+    let bar = |near: f32| {
+        Synthetic::new(160, 40, FOCAL, move |_, row| match row {
+            11..=17 => Some(5.0 - near * 5.0 / FOCAL),
+            18..=28 => Some(5.0),
+            _ => None,
+        })
+    };
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let stroke = [[2.5, 23.5], [157.5, 23.5]]; // (walks reach 160 / 8 px)
+    let radius = |scene: &Synthetic, colour_of: &dyn Fn(usize) -> [f32; 3]| {
+        let rows = scene.centres.iter().map(|c| (c[1] * FOCAL / c[2]) as usize);
+        let colours: Vec<[f32; 3]> = rows.map(colour_of).collect();
+        let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
+        estimate_radius(&scene.image().with_colours(&ids, &colours).unwrap(), &stroke, &params).unwrap().radius
+    };
+    let black = |_: usize| [0.1, 0.1, 0.12];
+    // every walk ends at the outline on both sides over the bar's colour: 9 px at 5 / 100
+    let whole = radius(&bar(12.0), &black);
+    assert!((whole - 0.45).abs() < 0.02, "R = {whole}");
+    // without colours, or where the nearer face is of another colour (a leaf's edge beside a
+    // stem), only the face under the stroke: 5.5 px
+    let plain = estimate_radius(&bar(12.0).image(), &stroke, &params).unwrap().radius;
+    assert!((plain - 0.275).abs() < 0.02, "R = {plain}");
+    let green_face = |row: usize| if row < 18 { [0.2, 0.6, 0.2] } else { [0.1, 0.1, 0.12] };
+    let two_colours = radius(&bar(12.0), &green_face);
+    assert!((two_colours - 0.275).abs() < 0.02, "R = {two_colours}");
+    // a same-coloured surface over three times the part's width outlined with it (a leaf behind a
+    // stem of its colour) is not taken for it: a 5 px stem (rows 18..=22) before a 12 px strip 20 px
+    // behind, both within the walks' reach
+    let stem_before_strip = Synthetic::new(160, 60, FOCAL, |_, row| match row {
+        18..=22 => Some(5.0),
+        23..=34 => Some(5.0 + 20.0 * 5.0 / FOCAL),
+        _ => None,
+    });
+    let stroke = [[2.5, 20.5], [157.5, 20.5]];
+    let colours = vec![[0.1, 0.1, 0.12]; stem_before_strip.centres.len()];
+    let ids: Vec<u32> = (0..stem_before_strip.centres.len() as u32).collect();
+    let image = stem_before_strip.image().with_colours(&ids, &colours).unwrap();
+    let stem = estimate_radius(&image, &stroke, &params).unwrap().radius;
+    assert!((stem - 0.125).abs() < 0.02, "R = {stem}");
+}
+
+#[test]
 fn a_part_in_front_of_a_surface_close_behind_measures_alone() {
     // A 5 px rope 10 px of world size in front of a wall: they are separate surfaces.
     let scene = Synthetic::new(80, 40, FOCAL, |_, row| {

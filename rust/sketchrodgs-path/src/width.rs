@@ -122,6 +122,29 @@ impl Walks {
         self.silhouette_behind[0].min(self.silhouette_behind[1])
     }
 
+    /// The last walk's width from silhouette to silhouette, where it has one on both sides (nothing
+    /// shown, or a surface far behind) and every pixel it crossed before them shows a Gaussian of
+    /// `colour` (the part's, and how far off it may be): then all it crossed is the part, whatever
+    /// its depths (docs/extraction.md, "Radius", A flat bar's faces). None otherwise.
+    pub fn outline_width(&self, image: &IndexImage, colour: ([f32; 3], f32)) -> Option<usize> {
+        if !self.silhouette_behind.iter().all(|&behind| behind > 0.0) {
+            return None;
+        }
+        let mut width = 1;
+        for (walk, pixels) in self.ways.iter().zip(&self.pixels) {
+            // up to the last pixel that passed: the failing ones after it are the silhouette
+            let run = walk.iter().rposition(|z| !z.is_nan()).map_or(0, |k| k + 1);
+            let of_the_part = |(z, &q): (&f32, &usize)| {
+                z.is_nan() || image.colour(q).is_some_and(|c| colour_distance(c, colour.0) <= colour.1)
+            };
+            if !walk[..run].iter().zip(&pixels[..run]).all(of_the_part) {
+                return None;
+            }
+            width += run;
+        }
+        Some(width)
+    }
+
     /// The width of the last walk from a pixel at depth `z0`: the run around it in its depth
     /// cluster. The run's pixels in the cluster (the start left out) go into `run_pixels`, if given.
     fn width(&self, z0: f32, gap: f32, mut run_pixels: Option<&mut Vec<usize>>) -> usize {
