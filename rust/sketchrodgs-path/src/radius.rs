@@ -48,9 +48,9 @@ const OUTLINED_BEHIND_R: f32 = 6.0;
 /// of their big Gaussians, which give the pixels' depths, lie more than the 8 px floor apart
 /// (a stand leg's widths fell in two groups, 0.08-0.52 and 0.62-1.14 `R`). That width counts where
 /// it is at most this many times the cluster's: a same-coloured surface outlined with the part (a
-/// leaf behind a stem) is often wider. At 2 both stand legs' views stayed 1.50-1.56 x
-/// apart; at 4, or without a bound, 10 and 9 of the turned views came out outside 0.7-1.4 x `R`
-/// instead of 7 (docs/extraction.md, "Radius", A flat bar's faces).
+/// leaf behind a stem) is often wider. At 2 the stand legs' views stayed 1.50 and 1.56 x apart; at
+/// 4, or without a bound, 10 and 9 of the turned views came out outside 0.7-1.4 x `R` instead of 7
+/// (docs/extraction.md, "Radius", A flat bar's faces).
 const OUTLINE_RATIO: usize = 3;
 
 /// What [`estimate_radius`] found.
