@@ -16,6 +16,7 @@ import shutil
 import socket
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from importlib.metadata import version
 
@@ -307,6 +308,22 @@ def test_a_second_tab_keeps_its_own_mode(session):
         assert page.get_by_text("drag a ball on a rod").first.is_visible()
     finally:
         other.close()
+
+
+def test_a_notice_on_a_tab_closed_since_is_left_alone(session):
+    """An extraction's spinner turns into its result when the extraction ends. Where the tab closed
+    meanwhile, viser queued the change for a client that is gone and warned that it would never
+    arrive (seen at the end of the close-up sprinkle test); the notice now skips closed tabs."""
+    app = session.app
+    other, other_client = session.open_tab()
+    notice = app.feedback.notify(other_client, "busy", "Finding the rod")
+    other.close()
+    wait_for(lambda: other_client.client_id not in app.server.get_clients(), 10, "the tab to close")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        app.feedback.update(notice, "done", "Rod added")
+    assert [str(w.message) for w in caught] == []
+    assert app.feedback.last is not None and app.feedback.last.title == "Rod added"
 
 
 FOREIGN_PAGE = """<!doctype html><title>elsewhere</title><body>connecting</body><script>

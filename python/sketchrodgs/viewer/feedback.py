@@ -63,11 +63,15 @@ class Notice:
     """A notification shown on one or several tabs, which can change (a spinner turning into the
     result)."""
 
-    def __init__(self, handles: list[Any]) -> None:
-        self._handles = handles
+    def __init__(self, server: viser.ViserServer, handles: list[tuple[int, Any]]) -> None:
+        self._server = server
+        self._handles = handles  # (the tab's client id, its notification)
 
     def update(self, kind: Kind, title: str, body: str) -> None:
-        for handle in self._handles:
+        open_tabs = self._server.get_clients()
+        for client_id, handle in self._handles:
+            if client_id not in open_tabs:
+                continue  # closed since: viser would queue the change and warn that it never arrives
             try:
                 handle.title, handle.body = title, body
                 handle.loading = kind == "busy"
@@ -100,21 +104,20 @@ class Feedback:
         handles = []
         for c in clients:
             try:
-                handles.append(
-                    c.add_notification(
-                        title,
-                        body,
-                        loading=kind == "busy",
-                        with_close_button=True,
-                        auto_close_seconds=SECONDS[kind],
-                        color=COLOURS[kind],
-                    )
+                handle = c.add_notification(
+                    title,
+                    body,
+                    loading=kind == "busy",
+                    with_close_button=True,
+                    auto_close_seconds=SECONDS[kind],
+                    color=COLOURS[kind],
                 )
             except Exception:  # the tab closed meanwhile
                 continue
+            handles.append((c.client_id, handle))
         if kind == "error":
             logger.info("%s %s", title, body)
-        return Notice(handles)
+        return Notice(self.server, handles)
 
     def update(self, notice: Notice, kind: Kind, title: str, body: str = "") -> None:
         """Change what `notice` says."""
