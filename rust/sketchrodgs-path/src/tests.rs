@@ -37,6 +37,19 @@ impl Synthetic {
         trace_stroke(&self.image(), &self.centres, stroke, &params)
     }
 
+    /// `estimate_radius` with each Gaussian coloured by its pixel's row (its centre's y is
+    /// (row + 0.5) z / focal).
+    fn radius_with_colours(
+        &self,
+        stroke: &[[f32; 2]],
+        params: &TraceParams,
+        colour_of: impl Fn(usize) -> [f32; 3],
+    ) -> f32 {
+        let colours: Vec<[f32; 3]> = self.centres.iter().map(|c| colour_of((c[1] * FOCAL / c[2]) as usize)).collect();
+        let ids: Vec<u32> = (0..self.centres.len() as u32).collect();
+        estimate_radius(&self.image().with_colours(&ids, &colours).unwrap(), stroke, params).unwrap().radius
+    }
+
     fn rows_of(&self, piece: &Piece) -> Vec<u32> {
         piece.pixels.iter().map(|p| p[1]).collect()
     }
@@ -469,15 +482,9 @@ fn the_radius_of_a_shaded_rope_against_the_background_or_a_wall_behind_is_its_si
     // rope lying on a grey floor at its own depth is told by its colour.
     let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
     let stroke = [[2.5, 20.5], [77.5, 20.5]];
-    let radius_with_colours = |scene: &Synthetic| {
-        // each Gaussian coloured by its pixel's row (its centre's y is (row + 0.5) z / focal)
-        let rows = scene.centres.iter().map(|c| (c[1] * FOCAL / c[2]) as usize);
-        let colours: Vec<[f32; 3]> = rows
-            .map(|row| if (16..=24).contains(&row) { [0.9 - 0.12 * (row - 16) as f32, 0.7, 0.2] } else { [0.5; 3] })
-            .collect();
-        let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
-        estimate_radius(&scene.image().with_colours(&ids, &colours).unwrap(), &stroke, &params).unwrap().radius
-    };
+    let shaded =
+        |row: usize| if (16..=24).contains(&row) { [0.9 - 0.12 * (row - 16) as f32, 0.7, 0.2] } else { [0.5; 3] };
+    let radius_with_colours = |scene: &Synthetic| scene.radius_with_colours(&stroke, &params, shaded);
     let alone = Synthetic::new(80, 40, FOCAL, |_, row| (16..=24).contains(&row).then_some(5.0));
     let radius = radius_with_colours(&alone);
     assert!((radius - 0.225).abs() < 0.02, "R = {radius} (the rope's half-width: 4.5 px at 5 / 100)");
@@ -529,22 +536,16 @@ fn the_radius_of_a_bar_showing_two_faces_is_the_whole_bars_where_its_colour_outl
     };
     let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
     let stroke = [[2.5, 23.5], [157.5, 23.5]]; // (walks reach 160 / 8 px)
-    let radius = |scene: &Synthetic, colour_of: &dyn Fn(usize) -> [f32; 3]| {
-        let rows = scene.centres.iter().map(|c| (c[1] * FOCAL / c[2]) as usize);
-        let colours: Vec<[f32; 3]> = rows.map(colour_of).collect();
-        let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
-        estimate_radius(&scene.image().with_colours(&ids, &colours).unwrap(), &stroke, &params).unwrap().radius
-    };
     let black = |_: usize| [0.1, 0.1, 0.12];
     // every walk ends at the outline on both sides over the bar's colour: 9 px at 5 / 100
-    let whole = radius(&bar(12.0), &black);
+    let whole = bar(12.0).radius_with_colours(&stroke, &params, black);
     assert!((whole - 0.45).abs() < 0.02, "R = {whole}");
     // without colours, or where the nearer face is of another colour (a leaf's edge beside a
     // stem), only the face under the stroke: 5.5 px
     let plain = estimate_radius(&bar(12.0).image(), &stroke, &params).unwrap().radius;
     assert!((plain - 0.275).abs() < 0.02, "R = {plain}");
     let green_face = |row: usize| if row < 18 { [0.2, 0.6, 0.2] } else { [0.1, 0.1, 0.12] };
-    let two_colours = radius(&bar(12.0), &green_face);
+    let two_colours = bar(12.0).radius_with_colours(&stroke, &params, green_face);
     assert!((two_colours - 0.275).abs() < 0.02, "R = {two_colours}");
     // a same-coloured surface over three times the part's width outlined with it (a leaf behind a
     // stem of its colour) is not taken for it: a 5 px stem (rows 18..=22) before a 12 px strip 20 px
@@ -554,11 +555,7 @@ fn the_radius_of_a_bar_showing_two_faces_is_the_whole_bars_where_its_colour_outl
         23..=34 => Some(5.0 + 20.0 * 5.0 / FOCAL),
         _ => None,
     });
-    let stroke = [[2.5, 20.5], [157.5, 20.5]];
-    let colours = vec![[0.1, 0.1, 0.12]; stem_before_strip.centres.len()];
-    let ids: Vec<u32> = (0..stem_before_strip.centres.len() as u32).collect();
-    let image = stem_before_strip.image().with_colours(&ids, &colours).unwrap();
-    let stem = estimate_radius(&image, &stroke, &params).unwrap().radius;
+    let stem = stem_before_strip.radius_with_colours(&[[2.5, 20.5], [157.5, 20.5]], &params, black);
     assert!((stem - 0.125).abs() < 0.02, "R = {stem}");
 }
 
