@@ -432,6 +432,22 @@ def test_a_sprinkle_whose_chain_took_the_icing_for_a_stretch_keeps_its_rod_to_it
     assert on_screen >= 0.6 * np.linalg.norm(np.diff(stroke, axis=0), axis=1).sum()
 
 
+def test_a_sprinkle_seen_from_twice_as_far_gets_the_rod_it_gets_close_up():
+    """Sprinkle a in az000 with the view zoomed out 2 x (the sprinkle 10 px wide, as a user sees it
+    with more of the donut in view). The chain behind the front took a strip of icing far behind
+    for the part and ran under the sprinkle, which measures as wide as the icing it lies on: its
+    path showed one Gaussian and the stroke was refused. A trace over the layers behind that makes
+    no rod now leaves the front's (docs/extraction.md, "What lies behind")."""
+    scene, case, camera, stroke = _case_view("cases", "donut_sprinkle_a", "az000")
+    radius = case["radius"]
+    close = extract_rod(scene, camera, stroke, radius=radius)
+    far_camera, far_stroke = zoomed(camera, stroke, 0.5)
+    far = extract_rod(scene, far_camera, far_stroke, radius=radius)
+    assert polyline_agreement(close.polyline, far.polyline, radius)["max"] <= 0.5
+    blue = scene.colors_of(far.path_gaussian_ids)
+    assert (blue[:, 2] > blue[:, 0]).all()  # the sprinkle's Gaussians, not the pink icing's
+
+
 def test_a_sprinkle_drawn_by_two_big_gaussians_is_not_refused_as_too_short():
     """A jittered stroke over sprinkle_13 in az270 (the second draw's fifth) keeps 2 big Gaussians
     on its path. Their centres lie 1.8 R apart (lightly smoothed), under the 2 R a rod needs, though

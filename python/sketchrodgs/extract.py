@@ -10,7 +10,7 @@ import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -377,22 +377,26 @@ def _extract(
     partial = PartialRender(scene, camera, None if given else band_of_stroke(), front=render)
     render_s = time.perf_counter() - clock
     layered = False
+    front: _Traced | None = None  # the last whole trace over the front alone
     while True:
         # The search records what it read outside the rendered tiles; those tiles are then
         # rendered and the search runs again (partial_render.py). A search that could run behind
         # what lies in front of the object asks for the layers behind; it then runs again with them.
         missed = partial.missed()
         try:
-            radius_found, estimated, wants_behind, trace, pixel_path, path_ids, points = _trace(
-                scene, camera, partial, stroke, radius, alpha, band_px, timings, missed
-            )
+            found = _trace(scene, camera, partial, stroke, radius, alpha, band_px, timings, missed)
         except PathNotFoundError:
-            if not missed.any():
+            if missed.any():
+                found = None
+            elif layered and front is not None:
+                found = front  # the layers behind lost the part: keep what the front alone found
+            else:
                 raise
         clock = time.perf_counter()
         if missed.any():
             partial.add(missed)
-        elif wants_behind and not layered:
+        elif found is not None and found.wants_behind and not layered:
+            front = found
             partial.add_behind(BEHIND_LAYERS, band_of_stroke())
             layered = True
         else:
@@ -400,15 +404,20 @@ def _extract(
         render_s += time.perf_counter() - clock
     if partial.renders:
         timings["render"] = render_s
-    radius = radius_found
+    assert found is not None  # (the loop ends on a trace, or raises)
+    rod_points = found.rod_points(scene, camera)
+    if rod_points is None and front is not None and found is not front:
+        # A part lying on a surface can be taken for a leaf in front of what lies behind it: where the
+        # chain behind then makes no rod, the front's does (docs/extraction.md, "What lies behind").
+        front_points = front.rod_points(scene, camera)
+        if front_points is not None:
+            found, rod_points = front, front_points
+    radius, estimated, _, trace, pixel_path, path_ids, points = found
     flip = _flipped(stroke)
     pieces = trace.pieces
 
     clock = time.perf_counter()
-    if len(points) >= 2 and pl.polyline_length(points) < 2 * radius:
-        line = _line_over_path_pixels(points, scene, camera, pieces, path_ids)
-        points = line if pl.polyline_length(line) > pl.polyline_length(points) else points
-    if len(points) < 2 or pl.polyline_length(points) < 2 * radius:
+    if rod_points is None:
         length = pl.polyline_length(points) if len(points) > 1 else 0.0
         path_px = sum(len(p.pixels) for p in pieces)
         # a long path on under two of the part's Gaussians ran over what the part lies on or
@@ -426,6 +435,7 @@ def _extract(
             pixel_path,
             pieces,
         )
+    points = rod_points
     # Recentre on a uniform sampling at half the radius, smooth, bridge detours, cut hooked ends
     # and ends turning off at a junction, resample to the edge length.
     _check_vertex_count("radius", pl.polyline_length(points), radius / 2, radius, 4 * MAX_ROD_VERTICES)
@@ -506,6 +516,28 @@ _BREAK_AHEAD_R = 2.0
 _BREAK_WINDOW_R = (3.0, 8.0)
 
 
+class _Traced(NamedTuple):
+    """What `_trace` found."""
+
+    radius: float
+    estimated: bool
+    wants_behind: bool  # whether the layers behind the front could change it
+    trace: _core.Trace
+    pixel_path: list[np.ndarray]  # in the user's direction
+    path_ids: np.ndarray
+    points: np.ndarray  # the path's Gaussians' centres, lightly smoothed
+
+    def rod_points(self, scene: GaussianScene, camera: Camera) -> np.ndarray | None:
+        """The points where they make a rod two diameters long, or the line over the path's pixels
+        where that is longer (`_line_over_path_pixels`); None where neither does."""
+        points, length = self.points, (pl.polyline_length(self.points) if len(self.points) > 1 else 0.0)
+        if len(points) >= 2 and length < 2 * self.radius:
+            line = _line_over_path_pixels(points, scene, camera, self.trace.pieces, self.path_ids)
+            if pl.polyline_length(line) > length:
+                points, length = line, pl.polyline_length(line)
+        return points if len(points) >= 2 and length >= 2 * self.radius else None
+
+
 def _trace(
     scene: GaussianScene,
     camera: Camera,
@@ -516,10 +548,9 @@ def _trace(
     band_px: float | None,
     timings: dict[str, float],
     missed: np.ndarray,
-) -> tuple:
+) -> _Traced:
     """Everything that reads the render: R (estimated when None), the path, its Gaussians in order
-    and their centres lightly smoothed. Returns (radius, estimated, whether the layers behind could
-    change the result, trace, pixel_path (user's direction), path_ids, points)."""
+    and their centres lightly smoothed."""
     index, depth, opacity, work, flip = _search_inputs(partial.result, stroke)
     focal = float(camera.fx)
     region: dict[str, Any] = {"rendered": partial.tiles, "missed": missed, "behind": partial.behind_arrays()}
@@ -602,7 +633,7 @@ def _trace(
             except PathNotFoundError:
                 pass
     timings["path_search"] = time.perf_counter() - clock
-    return radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points
+    return _Traced(radius, estimated, estimate_wants or trace.wants_behind, trace, pixel_path, path_ids, points)
 
 
 def _path_length_on_screen(pixel_path: list[np.ndarray], depth: np.ndarray, focal: float) -> float:
