@@ -55,6 +55,13 @@ def calls(rng: np.random.Generator) -> list[tuple]:
         (_core.crowding, axis, tangents, points, 0.5, 1.25, float(rng.choice([2.5, np.nan, -1.0]))),
         (_core.rows_in_box, points, tuple(rng.normal(size=3)), tuple(rng.normal(size=3))),
         (_core.median_neighbour_distance, points, int(rng.integers(0, 6)), int(rng.integers(0, 600))),
+        (
+            _core.small_clusters,
+            points,
+            float(rng.choice([0.1, np.nan, 0.0, -1.0, 1e30])),
+            rng.integers(-1, n + 2, int(rng.integers(0, 5))).astype(np.int64),
+            float(rng.choice([0.5, np.nan, -1.0, np.inf])),
+        ),
         (_core.bumps, axis, 0.01, 3.0, 1.0, 30.0, 2.0, 4.0),
         (
             _core.continuation,

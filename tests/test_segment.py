@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from sketchrodgs import Camera, extract_rod, synthetic
+from sketchrodgs import Camera, SketchRodGSError, extract_rod, synthetic
 from sketchrodgs.extract import Extraction
 from sketchrodgs.polyline import polyline_length
 from sketchrodgs.rod import Rod
@@ -284,6 +284,42 @@ def test_the_link_spacing_is_what_a_kd_tree_gives():
         _core.median_neighbour_distance(
             np.where(np.arange(6)[:, None] == 2, np.nan, np.ones((6, 3), np.float32)), 4, 500
         )
+
+
+def test_the_strays_clusters_are_what_scipys_components_give():
+    # the strays' clusters came from scipy (every pair within the link, connected components, each
+    # component's box); the Rust search that replaced it stops at a large body and gives the same
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    from sketchrodgs import _core
+
+    rng = np.random.default_rng(5)
+    # specks, small clumps and a dense slab, as around a pulled part's end
+    points = np.concatenate(
+        [
+            rng.uniform(0, 1, (600, 3)),
+            (rng.uniform(0, 1, (40, 1, 3)) + rng.normal(scale=0.01, size=(40, 8, 3))).reshape(-1, 3),
+            rng.uniform([0, 0, 1.0], [1, 1, 1.05], (3000, 3)),
+        ]
+    ).astype(np.float32)
+    link, size = 0.04, 0.1
+    seeds = np.flatnonzero(rng.random(len(points)) < 0.3)
+    pairs = cKDTree(points.astype(np.float64)).query_pairs(link, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
+    clusters, label = connected_components(graph, directed=False)
+    seeded = np.zeros(clusters, bool)
+    seeded[label[seeds]] = True
+    low, high = np.full((clusters, 3), np.inf), np.full((clusters, 3), -np.inf)
+    np.minimum.at(low, label, points.astype(np.float64))
+    np.maximum.at(high, label, points.astype(np.float64))
+    expected = (seeded & (np.linalg.norm(high - low, axis=1) <= size))[label]
+    small = _core.small_clusters(points, link, seeds.astype(np.int64), size)
+    assert expected.any() and not expected.all()
+    np.testing.assert_array_equal(small, expected)
+    with pytest.raises(SketchRodGSError, match="seed 3920 is not one of the 3920 points"):
+        _core.small_clusters(points, link, np.array([len(points)], np.int64), size)
 
 
 def test_bad_input_is_a_clear_error():

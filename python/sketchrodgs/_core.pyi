@@ -93,6 +93,9 @@ def continuation(
     link: float,
 ) -> npt.NDArray[np.int64]: ...
 def median_neighbour_distance(points: npt.NDArray[np.float32], k: int, samples: int) -> float | None: ...
+def small_clusters(
+    points: npt.NDArray[np.float32], link: float, seeds: npt.NDArray[np.int64], size: float
+) -> npt.NDArray[np.bool_]: ...
 def detours(
     points: npt.NDArray[np.float64],
     uv: npt.NDArray[np.float64],

@@ -36,8 +36,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from . import _core
@@ -300,18 +298,9 @@ def _with_strays(
     if not (to_moving <= reach).any():
         return binding
     # clusters of linked Gaussians; one goes when it comes within `reach` of what moves and is no
-    # larger than `size` (one that runs on into the scene is larger)
-    count = len(points)
-    pairs = cKDTree(points).query_pairs(link, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
-    clusters, label = connected_components(graph, directed=False)
-    close = np.zeros(clusters, bool)
-    close[label[to_moving <= reach]] = True
-    low = np.full((clusters, 3), np.inf)
-    high = np.full((clusters, 3), -np.inf)
-    np.minimum.at(low, label, points)
-    np.maximum.at(high, label, points)
-    goes = (close & (np.linalg.norm(high - low, axis=1) <= size))[label]
+    # larger than `size` (one that runs on into the scene is larger, and is not searched whole)
+    seeds = np.flatnonzero(to_moving <= reach)
+    goes = _core.small_clusters(_f32(points), link, seeds, size)
     if not goes.any():
         return binding
     stray_rows = rows[goes]

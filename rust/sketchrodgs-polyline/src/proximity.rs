@@ -36,6 +36,8 @@ pub enum ProximityError {
     NonFinitePoint(usize),
     #[error("points lie in {0} distinct cells along one axis, too many to index")]
     TooManyCells(usize),
+    #[error("seed {seed} is not one of the {points} points")]
+    SeedOutOfRange { seed: usize, points: usize },
 }
 
 /// The cell of `p` in a grid of `width`-wide cells: `floor(c / width)` per coordinate (without a
@@ -542,6 +544,42 @@ impl Components {
     }
 }
 
+/// Per point, whether it lies in a small cluster: a component of the points linked within `link`
+/// that holds one of the `seeds` and spans at most `size` (its bounding box's diagonal, in f64).
+/// Each search stops at the first point farther than `size` from its seed, whose component
+/// therefore spans more: a large body next to the seeds is not walked whole. Segmentation's strays
+/// (docs/deformation.md, "Segmentation"; `segment._with_strays`).
+pub fn small_clusters(points: &[[f32; 3]], link: f32, seeds: &[usize], size: f64) -> Result<Vec<bool>, ProximityError> {
+    if let Some(&seed) = seeds.iter().find(|&&seed| seed >= points.len()) {
+        return Err(ProximityError::SeedOutOfRange { seed, points: points.len() });
+    }
+    let mut small = vec![false; points.len()];
+    let mut components = Components::new(points, link)?;
+    let mut component = Vec::new();
+    let apart = |a: [f32; 3], b: [f32; 3]| {
+        let d = [0, 1, 2].map(|k| f64::from(a[k]) - f64::from(b[k]));
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+    };
+    for &seed in seeds {
+        let origin = points[seed];
+        if components.search(seed, |i| apart(points[i], origin) > size, &mut component) != Some(false) {
+            continue;
+        }
+        let (mut low, mut high) = (points[seed], points[seed]);
+        for &i in &component {
+            for k in 0..3 {
+                (low[k], high[k]) = (low[k].min(points[i][k]), high[k].max(points[i][k]));
+            }
+        }
+        if apart(high, low) <= size {
+            for &i in &component {
+                small[i] = true;
+            }
+        }
+    }
+    Ok(small)
+}
+
 /// Point kinds for [`grow`].
 pub const SEED: u8 = 0;
 pub const ELIGIBLE: u8 = 1;
@@ -918,6 +956,41 @@ mod tests {
         assert_eq!(
             linked_to(&spread, &spread_group, 0, 1, link).unwrap()[..400],
             linked_to(&points, &group, 0, 1, link).unwrap()[..]
+        );
+    }
+
+    #[test]
+    fn small_clusters_are_the_seeded_components_no_wider_than_the_size() {
+        // clusters of a random cloud (link 0.05: many small ones, and a few long chains), seeded at
+        // every third point: each point's answer is that of its whole component, searched whole
+        let points = cloud(600, 7);
+        let (link, size) = (0.05, 0.12);
+        let seeds: Vec<usize> = (0..600).step_by(3).collect();
+        let small = small_clusters(&points, link, &seeds, size).unwrap();
+        let labels = components(&points, link);
+        let count = *labels.iter().max().unwrap() as usize + 1;
+        let (mut low, mut high) = (vec![[f32::INFINITY; 3]; count], vec![[f32::NEG_INFINITY; 3]; count]);
+        let mut seeded = vec![false; count];
+        for (i, &l) in labels.iter().enumerate() {
+            for k in 0..3 {
+                low[l as usize][k] = low[l as usize][k].min(points[i][k]);
+                high[l as usize][k] = high[l as usize][k].max(points[i][k]);
+            }
+            seeded[l as usize] |= i % 3 == 0;
+        }
+        let spans = |l: usize| {
+            let d = [0, 1, 2].map(|k| f64::from(high[l][k]) - f64::from(low[l][k]));
+            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+        };
+        let expected: Vec<bool> = labels.iter().map(|&l| seeded[l as usize] && spans(l as usize) <= size).collect();
+        assert_eq!(small, expected);
+        assert!(small.iter().any(|&s| s) && small.iter().zip(&labels).any(|(&s, &l)| !s && seeded[l as usize]));
+        // the seeds' order does not matter, and a seed out of range is an error
+        let reversed: Vec<usize> = seeds.iter().rev().copied().collect();
+        assert_eq!(small_clusters(&points, link, &reversed, size).unwrap(), small);
+        assert_eq!(
+            small_clusters(&points, link, &[600], size),
+            Err(ProximityError::SeedOutOfRange { seed: 600, points: 600 })
         );
     }
 

@@ -1,7 +1,7 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
 //! `_core.crowding(...)`,
 //! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`, `_core.continuation(...)`,
-//! `_core.detours(...)`, `_core.median_neighbour_distance(...)`.
+//! `_core.detours(...)`, `_core.median_neighbour_distance(...)`, `_core.small_clusters(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -248,6 +248,32 @@ fn median_neighbour_distance<'py>(
     run_parallel(py, "median_neighbour_distance", || proximity::median_neighbour_distance(points, k, samples))
 }
 
+/// Per point of `points` (N, 3) float32, whether it lies in a cluster of points linked within
+/// `link` that holds one of `seeds` (K,) int64 and spans at most `size`
+/// (`sketchrodgs_polyline::proximity::small_clusters`). Returns (N,) bool.
+#[pyfunction]
+fn small_clusters<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    link: f32,
+    seeds: &Bound<'py, PyArray1<i64>>,
+    size: f64,
+) -> PyResult<Bound<'py, PyArray1<bool>>> {
+    let (points, seeds) = (points.try_readonly()?, seeds.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let seeds: Vec<usize> = contiguous(&seeds, "seeds")?
+        .iter()
+        .map(|&s| usize::try_from(s).map_err(|_| SketchRodGSError::new_err(format!("seeds: {s} is negative"))))
+        .collect::<PyResult<_>>()?;
+    if !(size.is_finite() && size >= 0.0) {
+        return Err(SketchRodGSError::new_err(format!("size: must be finite and >= 0, got {size}")));
+    }
+    let small = run_parallel(py, "small_clusters", || proximity::small_clusters(points, link, &seeds, size))?
+        .map_err(|err| SketchRodGSError::new_err(format!("small_clusters: {err}")))?;
+    Ok(small.into_pyarray(py))
+}
+
 /// The detours of the axis `points` (M, 3) float64 seen at `uv` (M, 2) float64 with `radius_px`
 /// (M,) float64 (`sketchrodgs_polyline::detours::detours`; the limits in radii, `back_ratio` a
 /// ratio): (K, 2) int64, each row the first and last point of a stretch to put onto its chord.
@@ -344,5 +370,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(detours, m)?)?;
     m.add_function(wrap_pyfunction!(bumps, m)?)?;
     m.add_function(wrap_pyfunction!(median_neighbour_distance, m)?)?;
+    m.add_function(wrap_pyfunction!(small_clusters, m)?)?;
     Ok(())
 }
