@@ -220,13 +220,20 @@ fn continuation<'py>(
             _ => Err(SketchRodGSError::new_err(format!("seeds: {s} is not one of the {} points", points.len()))),
         })
         .collect::<PyResult<_>>()?;
-    if !(size.is_finite() && size >= 0.0) {
-        return Err(SketchRodGSError::new_err(format!("size: must be finite and >= 0, got {size}")));
-    }
+    check_size(size)?;
     let rows =
         run_parallel(py, "continuation", || past_end::continuation(points, &seeds, vertex, outward, size, link))?
             .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
     Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
+}
+
+/// A cluster's `size` (the continuations' and the strays'): finite and >= 0.
+fn check_size(size: f64) -> PyResult<()> {
+    if size.is_finite() && size >= 0.0 {
+        Ok(())
+    } else {
+        Err(SketchRodGSError::new_err(format!("size: must be finite and >= 0, got {size}")))
+    }
 }
 
 /// The median over a sample of `points` (N, 3) float32 (every `N // samples`-th) of the distance
@@ -266,9 +273,7 @@ fn small_clusters<'py>(
         .iter()
         .map(|&s| usize::try_from(s).map_err(|_| SketchRodGSError::new_err(format!("seeds: {s} is negative"))))
         .collect::<PyResult<_>>()?;
-    if !(size.is_finite() && size >= 0.0) {
-        return Err(SketchRodGSError::new_err(format!("size: must be finite and >= 0, got {size}")));
-    }
+    check_size(size)?;
     let small = run_parallel(py, "small_clusters", || proximity::small_clusters(points, link, &seeds, size))?
         .map_err(|err| SketchRodGSError::new_err(format!("small_clusters: {err}")))?;
     Ok(small.into_pyarray(py))
