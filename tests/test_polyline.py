@@ -186,6 +186,36 @@ def test_a_detour_in_depth_or_doubling_back_is_bridged_and_a_bend_is_kept():
         np.testing.assert_array_equal(pl.bridge_detours(kept, R, *_seen_from(kept)), kept)
 
 
+def _tube_gaussians(axis: np.ndarray, seed: int = 0) -> np.ndarray:
+    """(N, 3) float32 centres over a tube of radius R around the polyline `axis` (points R/2 apart
+    or closer), 40 per point, as a capture seen from all sides has them."""
+    rng = np.random.default_rng(seed)
+    tangent = pl.tangents(axis)
+    side = np.cross(tangent, [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    up = np.cross(tangent, side)
+    angle = rng.uniform(0, 2 * np.pi, (len(axis), 40))
+    ring = np.cos(angle)[..., None] * side[:, None] + np.sin(angle)[..., None] * up[:, None]
+    return (axis[:, None] + R * rng.uniform(0.6, 1.0, angle.shape)[..., None] * ring).reshape(-1, 3).astype(np.float32)
+
+
+def test_a_long_detour_in_depth_is_bridged_where_the_part_runs_on_behind_it():
+    # A stem 40 R along x passes behind a leaf from 12 R to 28 R: the axis (recentred between the
+    # leaf and the stem) runs 5 R towards the camera and back over 16 R, too long for a detour.
+    x = np.arange(0, 40.01, 0.5) * R
+    climb = 5 * R * np.clip(1 - np.abs(x - 20 * R) / (8 * R), 0, None)
+    over_leaf = np.stack([x, 0 * x, -climb], axis=1)
+    stem = np.stack([x, 0 * x, 0 * x], axis=1)
+    seen = _seen_from(over_leaf)
+    np.testing.assert_array_equal(pl.bridge_detours(over_leaf, R, *seen), over_leaf)
+    # the capture has the stem's Gaussians behind the leaf: the axis goes onto the chord, back on it
+    bridged = pl.bridge_detours(over_leaf, R, *seen, centres=_tube_gaussians(stem))
+    assert np.abs(bridged[:, 2]).max() < 1e-12
+    # a stem that itself bends towards the camera so: its Gaussians follow the bend, none lie on the
+    # chord, and the bend is kept
+    np.testing.assert_array_equal(pl.bridge_detours(over_leaf, R, *seen, centres=_tube_gaussians(over_leaf)), over_leaf)
+
+
 def test_a_bump_out_and_back_into_line_is_bridged_and_a_bend_or_a_wave_is_kept():
     # a straight axis 30 R along x, every R/2; from 10 R to 16 R it runs 2.5 R aside and back into
     # line (the path onto a leaf pair's stalks at a node), seen from any side: bridged

@@ -446,7 +446,7 @@ def _extract(
         nearby = np.take(scene.means, part, axis=0)  # faster than `means[part]` (docs/extraction.md, "Speed")
         points = pl.recentre(points, nearby, radius)
     points = pl.smooth_axis(points, radius, smoothing)
-    points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2])
+    points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2], nearby if recentre else None)
     points = pl.cut_hooked_ends(points, radius)
     if recentre:
         points = pl.cut_junction_ends(points, nearby, radius)

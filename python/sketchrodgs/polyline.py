@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import solveh_banded
+from scipy.spatial import cKDTree
 
 from . import _core
 
@@ -60,6 +61,16 @@ _DETOUR_SCREEN = 0.7
 _DETOUR_BACK_RATIO = 2.5
 _DETOUR_BACK = 3.0
 _DETOUR_END = 3.0
+# ... and a longer one in depth, up to _BEHIND_SPAN radii and within _BEHIND_SCREEN of its chord on
+# screen, where the part runs on behind it: every chord sample has _BEHIND_CHORD times as many
+# Gaussians within R as the axis around the stretch has (the median over _BEHIND_AROUND radii each
+# side), and some point of the stretch under _BEHIND_GAP times as many
+_BEHIND_SPAN = 20.0
+_BEHIND_SCREEN = 1.5
+_BEHIND_CHORD = 0.5
+_BEHIND_GAP = 0.25
+_BEHIND_AROUND = 5.0
+_NEVER = 1e9  # a limit no stretch reaches (the doubling back is not judged in that pass)
 # bridge_detours, bumps: the longest stretch, how far it leaves its chord, within what angle (deg)
 # of the chord the axis runs over how long a lead either side, how far from the ends it lies
 _BUMP_SPAN = 8.0
@@ -323,7 +334,9 @@ def _uncornered(points: np.ndarray, radius: float) -> np.ndarray:
     return points[keep[0] : keep[1]]
 
 
-def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px: np.ndarray) -> np.ndarray:
+def bridge_detours(
+    points: np.ndarray, radius: float, uv: np.ndarray, radius_px: np.ndarray, centres: np.ndarray | None = None
+) -> np.ndarray:
     """Bridge the detours of the axis (docs/extraction.md, "Polyline", **Detours**): stretches of at
     most `_DETOUR_SPAN` radii that leave their chord and come back, either in depth (by more than
     `_DETOUR_DEPTH` radii, staying within `_DETOUR_SCREEN` radii of the chord on screen: the path
@@ -334,6 +347,11 @@ def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px:
     within `_DETOUR_END` radii of an end are left to `cut_hooked_ends`. The search (in Rust) takes
     points about R apart.
 
+    With `centres`, then the longer detours in depth (up to `_BEHIND_SPAN` radii, within
+    `_BEHIND_SCREEN` of the chord on screen) over which the part runs on behind what the path
+    climbed onto: its Gaussians lie along the chord, and the axis left them (`_part_runs_behind`;
+    docs/extraction.md, "Polyline", **Behind a leaf**).
+
     Then the bumps: stretches of at most `_BUMP_SPAN` radii leaving their chord by more than
     `_BUMP_OFF` radii where the axis runs within `_BUMP_ANGLE` degrees of that chord over
     `_BUMP_LEAD` radii on both sides (the path ran onto a leaf pair's stalks at a node and back).
@@ -343,6 +361,8 @@ def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px:
         radius: R, the object's radius.
         uv: (M, 2) the points projected into the stroke's camera (pixels).
         radius_px: (M,) R in pixels at each point's depth.
+        centres: (N, 3) the part's Gaussian centres around the axis (those the recentring read), or
+            None (no pass behind a leaf).
 
     Returns:
         (M, 3) float64.
@@ -355,12 +375,41 @@ def bridge_detours(points: np.ndarray, radius: float, uv: np.ndarray, radius_px:
     every = _about_radius_apart(points, radius)
     limits = (_DETOUR_SPAN, _DETOUR_DEPTH, _DETOUR_SCREEN, _DETOUR_BACK_RATIO, _DETOUR_BACK, _DETOUR_END)
     _onto_chords(points, every[_core.detours(points[every], uv[every], radius_px[every], radius, *limits)])
+    if centres is not None and len(centres):
+        every = _about_radius_apart(points, radius)
+        limits = (_BEHIND_SPAN, _DETOUR_DEPTH, _BEHIND_SCREEN, _NEVER, _NEVER, _DETOUR_END)
+        longer = every[_core.detours(points[every], uv[every], radius_px[every], radius, *limits)]
+        _onto_chords(points, longer[_part_runs_behind(points, longer, centres, radius)])
     every = _about_radius_apart(points, radius)
     bumps = _core.bumps(
         np.ascontiguousarray(points[every]), radius, _BUMP_SPAN, _BUMP_OFF, _BUMP_ANGLE, _BUMP_LEAD, _BUMP_END
     )
     _onto_chords(points, every[bumps])
     return points
+
+
+def _part_runs_behind(points: np.ndarray, stretches: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
+    """Per stretch (i, j) of `points`: whether the part's Gaussians run along its chord and the axis
+    over it leaves them (docs/extraction.md, "Polyline", **Behind a leaf**)."""
+    keep = np.zeros(len(stretches), bool)
+    step = max(polyline_length(points) / max(len(points) - 1, 1), 1e-12)
+    around = max(1, int(round(_BEHIND_AROUND * radius / step)))
+    for k, (i, j) in enumerate(stretches):
+        lo, hi = max(i - around, 0), min(j + around, len(points) - 1)
+        samples = max(2, int(np.ceil(np.linalg.norm(points[j] - points[i]) / (radius / 2))) + 1)
+        chord = points[i] + np.linspace(0.0, 1.0, samples)[:, None] * (points[j] - points[i])
+        region = points[lo : hi + 1]
+        near = cKDTree(np.take(centres, near_box(region, centres, radius), axis=0).astype(np.float64))
+        count = near.query_ball_point(np.vstack([region, chord]), radius, return_length=True)
+        on_axis, on_chord = count[: len(region)], count[len(region) :]
+        beside = np.concatenate([on_axis[: i - lo], on_axis[j - lo + 1 :]])
+        if len(beside) == 0:
+            continue
+        typical = float(np.median(beside))
+        keep[k] = on_chord.min() >= _BEHIND_CHORD * typical > 0 and on_axis[i - lo : j - lo + 1].min() < (
+            _BEHIND_GAP * typical
+        )
+    return keep
 
 
 def _about_radius_apart(points: np.ndarray, radius: float) -> np.ndarray:

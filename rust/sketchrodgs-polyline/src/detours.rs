@@ -39,13 +39,34 @@ pub fn detours(
     radius: f64,
     limits: DetourLimits,
 ) -> Vec<(usize, usize)> {
+    detours_read(points, uv, radius_px, radius, limits, Reading::SkipStraight)
+}
+
+/// Which stretches `detours_from` reads point by point.
+#[derive(Clone, Copy, PartialEq)]
+enum Reading {
+    /// Those whose arc leaves room for a point as far from the chord as a detour goes.
+    SkipStraight,
+    /// Every one (the tests' reference).
+    #[cfg(test)]
+    Every,
+}
+
+fn detours_read(
+    points: &[[f64; 3]],
+    uv: &[[f64; 2]],
+    radius_px: &[f64],
+    radius: f64,
+    limits: DetourLimits,
+    reading: Reading,
+) -> Vec<(usize, usize)> {
     let n = points.len().min(uv.len()).min(radius_px.len());
-    let arc = arc_in_radii(&points[..n], radius);
+    let axis = SeenAxis { points, uv, radius_px, radius, arc: arc_in_radii(&points[..n], radius) };
     // every detour, the one saving the most arc first (the whole excursion, not part of it with a
     // stub left) and, of those saving as much, the shortest (no stretch of the line either side)
     let mut all: Vec<(f64, usize, usize)> = Vec::new();
     for i in 0..n.saturating_sub(2) {
-        all.extend(detours_from(i, points, uv, radius_px, radius, &arc, limits));
+        all.extend(detours_from(i, &axis, limits, reading));
     }
     all.sort_by(|a, b| b.0.total_cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
     // then each that overlaps none taken before (sharing an end is not overlapping)
@@ -63,30 +84,42 @@ pub fn detours(
     found
 }
 
+/// An axis as `detours` reads it, with its arc length at each point in radii.
+struct SeenAxis<'a> {
+    points: &'a [[f64; 3]],
+    uv: &'a [[f64; 2]],
+    radius_px: &'a [f64],
+    radius: f64,
+    arc: Vec<f64>,
+}
+
 /// Each detour starting at point `i`: (the arc it saves over its chord, less `ARC_WEIGHT` times
 /// its arc, in radii; `i`; its last point).
-fn detours_from(
-    i: usize,
-    points: &[[f64; 3]],
-    uv: &[[f64; 2]],
-    radius_px: &[f64],
-    radius: f64,
-    arc: &[f64],
-    limits: DetourLimits,
-) -> Vec<(f64, usize, usize)> {
+fn detours_from(i: usize, axis: &SeenAxis, limits: DetourLimits, reading: Reading) -> Vec<(f64, usize, usize)> {
+    let SeenAxis { points, uv, radius_px, radius, ref arc } = *axis;
     let mut found = Vec::new();
     let last = arc.last().copied().unwrap_or(0.0);
     if arc[i] < limits.end {
         return found;
     }
+    let least_of_all = limits.depth.min(limits.back);
     for j in i + 2..arc.len() {
         if arc[j] - arc[i] > limits.span || last - arc[j] < limits.end {
             break;
         }
+        let (along, chord) = (arc[j] - arc[i], distance(&points[i], &points[j]) / radius);
+        // The stretch's points lie within the ellipse whose foci are its ends and whose focal
+        // distances sum to its arc: none is farther from the chord than its semi-minor axis. Where
+        // that is too short for any detour, the stretch is not read (most of an axis is nearly
+        // straight, and a stretch 20 R long was read point by point for every end).
+        if reading == Reading::SkipStraight
+            && (along * along - chord * chord) / 4.0 < least_of_all * least_of_all * (1.0 - 1e-9)
+        {
+            continue;
+        }
         let aside = (i + 1..j).map(|m| chord_distance(&uv[i], &uv[j], &uv[m])).fold(0.0, max_or_nan);
         // a NaN (a point behind the camera) is never on the line
         let on_line = aside / radius_px[i] < limits.screen;
-        let (along, chord) = (arc[j] - arc[i], distance(&points[i], &points[j]) / radius);
         let doubles_back = along >= limits.back_ratio * chord;
         let least = match (on_line, doubles_back) {
             (true, true) => limits.depth.min(limits.back),
@@ -236,6 +269,40 @@ mod tests {
         // within 3 R of an end: left to the hooked ends
         let (points, uv, radius_px) = seen(tent(3.0, 2.5, 4.0));
         assert!(detours(&points, &uv, &radius_px, 1.0, LIMITS).is_empty());
+    }
+
+    #[test]
+    fn skipping_the_straight_stretches_finds_what_reading_every_stretch_finds() {
+        // wiggly axes in 3D, every half radius, seen from several distances, with the limits of
+        // both passes (docs/extraction.md, "Polyline", Behind a leaf)
+        let behind = DetourLimits { span: 20.0, screen: 1.5, back_ratio: 1e9, back: 1e9, ..LIMITS };
+        let mut state = 12345_u64;
+        let mut random = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut found = 0;
+        for trial in 0..40 {
+            let (amplitude, wavelength) = (0.5 + 6.0 * random(), 2.0 + 20.0 * random());
+            let (phase, eye) = (10.0 * random(), 20.0 + 200.0 * random());
+            let points: Vec<[f64; 3]> = (0..121)
+                .map(|k| f64::from(k) * 0.5)
+                .map(|x| {
+                    let wave = (x / wavelength + phase).sin();
+                    [x, amplitude * wave * (x / 7.0).cos() * random(), -amplitude * wave.powi(3)]
+                })
+                .collect();
+            let uv: Vec<[f64; 2]> =
+                points.iter().map(|p| [100.0 * p[0] / (p[2] + eye), 100.0 * p[1] / (p[2] + eye)]).collect();
+            let radius_px: Vec<f64> = points.iter().map(|p| 100.0 / (p[2] + eye)).collect();
+            for limits in [LIMITS, behind] {
+                let skipping = detours_read(&points, &uv, &radius_px, 1.0, limits, Reading::SkipStraight);
+                let every = detours_read(&points, &uv, &radius_px, 1.0, limits, Reading::Every);
+                assert_eq!(skipping, every, "trial {trial}");
+                found += every.len();
+            }
+        }
+        assert!(found > 20, "{found}");
     }
 
     #[test]
