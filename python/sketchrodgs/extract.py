@@ -533,8 +533,9 @@ class _Traced(NamedTuple):
         points, length = self.points, (pl.polyline_length(self.points) if len(self.points) > 1 else 0.0)
         if len(points) >= 2 and length < 2 * self.radius:
             line = _line_over_path_pixels(points, scene, camera, self.trace.pieces, self.path_ids)
-            if pl.polyline_length(line) > length:
-                points, length = line, pl.polyline_length(line)
+            line_length = pl.polyline_length(line)
+            if line_length > length:
+                points, length = line, line_length
         return points if len(points) >= 2 and length >= 2 * self.radius else None
 
 

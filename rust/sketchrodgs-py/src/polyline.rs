@@ -213,18 +213,24 @@ fn continuation<'py>(
     let (points, seeds) = (points.try_readonly()?, seeds.try_readonly()?);
     check_shape("points", points.shape(), &[None, Some(3)])?;
     let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let seeds: Vec<u32> = contiguous(&seeds, "seeds")?
-        .iter()
-        .map(|&s| match u32::try_from(s) {
-            Ok(s) if (s as usize) < points.len() => Ok(s),
-            _ => Err(SketchRodGSError::new_err(format!("seeds: {s} is not one of the {} points", points.len()))),
-        })
-        .collect::<PyResult<_>>()?;
+    let seeds: Vec<u32> = seed_rows(contiguous(&seeds, "seeds")?, points.len())?;
     check_size(size)?;
     let rows =
         run_parallel(py, "continuation", || past_end::continuation(points, &seeds, vertex, outward, size, link))?
             .map_err(|e| SketchRodGSError::new_err(e.to_string()))?;
     Ok(rows.into_iter().map(i64::from).collect::<Vec<i64>>().into_pyarray(py))
+}
+
+/// The `seeds` (int64 rows of `count` points; the continuations' and the strays'), each checked to
+/// be one of them.
+fn seed_rows<T: TryFrom<i64>>(seeds: &[i64], count: usize) -> PyResult<Vec<T>> {
+    seeds
+        .iter()
+        .map(|&s| match T::try_from(s) {
+            Ok(row) if usize::try_from(s).is_ok_and(|u| u < count) => Ok(row),
+            _ => Err(SketchRodGSError::new_err(format!("seeds: seed {s} is not one of the {count} points"))),
+        })
+        .collect()
 }
 
 /// A cluster's `size` (the continuations' and the strays'): finite and >= 0.
@@ -269,10 +275,7 @@ fn small_clusters<'py>(
     let (points, seeds) = (points.try_readonly()?, seeds.try_readonly()?);
     check_shape("points", points.shape(), &[None, Some(3)])?;
     let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
-    let seeds: Vec<usize> = contiguous(&seeds, "seeds")?
-        .iter()
-        .map(|&s| usize::try_from(s).map_err(|_| SketchRodGSError::new_err(format!("seeds: {s} is negative"))))
-        .collect::<PyResult<_>>()?;
+    let seeds: Vec<usize> = seed_rows(contiguous(&seeds, "seeds")?, points.len())?;
     check_size(size)?;
     let small = run_parallel(py, "small_clusters", || proximity::small_clusters(points, link, &seeds, size))?
         .map_err(|err| SketchRodGSError::new_err(format!("small_clusters: {err}")))?;
