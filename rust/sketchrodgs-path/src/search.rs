@@ -433,10 +433,13 @@ fn wide_penalty(
 /// `ON_SURFACE_SHARE` of those pixels lie at the part's depth: within the depth gap and
 /// `SURFACE_SLOPE` times the lateral distance (a surface seen obliquely slopes away; at 1, a
 /// sprinkle on the donut's side in sprinkle_13's az000, its surface 8 R in front and 10 R behind at
-/// 3-5 R, had none).
+/// 3-5 R, had none). Or where `ONE_SIDE_SHARE` of one side's pixels do: a part lying at the edge
+/// of what it lies on, seen against the background beyond it (sprinkle c's az000, on the icing's
+/// silhouette: 94 % on one side, none on the other).
 const SURROUND_FROM_R: f32 = 3.0;
 const SURROUND_TO_R: f32 = 5.0;
 const ON_SURFACE_SHARE: f32 = 0.5;
+const ONE_SIDE_SHARE: f32 = 0.7;
 const SURFACE_SLOPE: f32 = 2.0;
 /// The two colours (`two_colours`) must lie this far apart (RGB, Euclidean).
 const PART_APART: f32 = 0.25;
@@ -454,9 +457,9 @@ const PRINCIPAL_ROUNDS: usize = 16;
 const SURROUND_COST: f64 = 4.0 * WIDE_WEIGHT * WIDE_CAP as f64;
 
 /// The part's colour and the surround's (`two_colours`) where the part lies on a surface at its own
-/// depth: half the pixels `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the clean stroke show a
-/// surface within the depth gap and `SURFACE_SLOPE` times the lateral distance of the part's
-/// depth. None where colours or the focal length are unknown, the part is outlined against the
+/// depth: half the pixels `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the clean stroke, or
+/// `ONE_SIDE_SHARE` of those on one side, show a surface within the depth gap and `SURFACE_SLOPE`
+/// times the lateral distance of the part's depth. None where colours or the focal length are unknown, the part is outlined against the
 /// background or what lies well behind it, or the two colours are alike.
 fn surface_colours(
     image: &IndexImage,
@@ -469,22 +472,30 @@ fn surface_colours(
     if focal <= 0.0 || !image.has_colours() {
         return None;
     }
-    let (mut ring, mut total) = (Vec::new(), 0_usize);
+    // the pixels tried on each side, and those at the part's depth on each side
+    let (mut ring, mut tried, mut at_depth) = (Vec::new(), 0_usize, [0_usize; 2]);
     for ((p, n), &z) in stroke.points.iter().zip(&stroke.normal).zip(&stroke.depth) {
         let radius_px = params.radius * focal / z;
         let (from, to) = ((SURROUND_FROM_R * radius_px).ceil() as usize, (SURROUND_TO_R * radius_px) as usize);
         for step in from..=to {
-            for sign in [1.0_f32, -1.0] {
-                total += 1;
+            tried += 1;
+            for (side, sign) in [1.0_f32, -1.0].into_iter().enumerate() {
                 let t = sign * step as f32;
                 let Some(q) = image.pixel_at(p[0] + t * n[0], p[1] + t * n[1]) else { continue };
-                if image.covered(q) && (image.depth(q) - z).abs() <= gap + SURFACE_SLOPE * step as f32 * z / focal {
-                    ring.extend(image.colour(q));
+                let within = gap + SURFACE_SLOPE * step as f32 * z / focal;
+                if image.covered(q)
+                    && (image.depth(q) - z).abs() <= within
+                    && let Some(colour) = image.colour(q)
+                {
+                    ring.push(colour);
+                    at_depth[side] += 1;
                 }
             }
         }
     }
-    if ring.is_empty() || (ring.len() as f32) < ON_SURFACE_SHARE * total as f32 {
+    let both_sides = (at_depth[0] + at_depth[1]) as f32 >= ON_SURFACE_SHARE * (2 * tried) as f32;
+    let one_side = at_depth.iter().any(|&count| count as f32 >= ONE_SIDE_SHARE * tried as f32);
+    if ring.is_empty() || !(both_sides || one_side) {
         return None;
     }
     let near: Vec<[f32; 3]> = band.pixel.iter().filter_map(|&p| image.colour(p as usize)).collect();

@@ -475,6 +475,47 @@ fn a_rope_lying_on_a_floor_of_big_gaussians_is_followed_by_its_colour_under_a_st
 }
 
 #[test]
+fn a_rope_along_the_edge_of_a_shelf_is_told_from_the_shelf_by_its_colour() {
+    // A rope 5 px thick (rows 18..=22) along the lower edge of a shelf at its own depth (rows
+    // 4..=17, Gaussians 10 px wide and the shelf's height), with nothing below the rope: seen
+    // against the background beyond the edge, as a sprinkle on the icing's silhouette. The stroke
+    // is drawn 4 px above the rope, over the shelf. Of the pixels 3-5 R across the stroke, 80 %
+    // show the shelf on its side and none on the other: under half of all, and the colours (orange
+    // rope, grey shelf) are still told apart, which keeps the path on the rope.
+    let on_rope = |row: usize| (18..=22).contains(&row);
+    let on_shelf = |row: usize| (4..=17).contains(&row);
+    let mut scene = Synthetic::new(80, 40, FOCAL, |_, row| on_rope(row).then_some(5.0));
+    let first_block = scene.centres.len();
+    for row in (0..40).filter(|&row| on_shelf(row)) {
+        for col in 0..80 {
+            scene.index[row * 80 + col] = (first_block + col / 10) as i32;
+            scene.depth[row * 80 + col] = 5.0;
+        }
+    }
+    for block in 0..8 {
+        let (x, y) = (block as f32 * 10.0 + 5.0, 11.0);
+        scene.centres.push([x * 5.0 / FOCAL, y * 5.0 / FOCAL, 5.0]);
+    }
+    let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
+    let (orange, grey) = ([0.85, 0.55, 0.2], [0.5, 0.45, 0.4]);
+    let colours: Vec<[f32; 3]> =
+        (0..scene.centres.len()).map(|g| if g < first_block { orange } else { grey }).collect();
+    let params = TraceParams { radius: 0.125, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
+    let stroke = [[2.5, 15.5], [77.5, 15.5]];
+    let middle_rows = |trace: &Trace| -> Vec<u32> {
+        trace.pieces.iter().flat_map(|p| &p.pixels).filter(|p| (10..70).contains(&p[0])).map(|p| p[1]).collect()
+    };
+    let plain = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
+    assert!(middle_rows(&plain).iter().any(|&r| !on_rope(r as usize)), "without colours the path takes the shelf");
+    let image = scene.image().with_colours(&ids, &colours).unwrap();
+    let trace = trace_stroke(&image, &scene.centres, &stroke, &params).unwrap();
+    let found = trace.colours.expect("the rope lies on the shelf");
+    assert_eq!((found.part, found.surround), (orange, grey));
+    let rows = middle_rows(&trace);
+    assert!(!rows.is_empty() && rows.iter().all(|&r| on_rope(r as usize)), "rows {rows:?}");
+}
+
+#[test]
 fn the_radius_of_a_shaded_rope_against_the_background_or_a_wall_behind_is_its_silhouettes() {
     // A rope 9 px thick (rows 16..=24) against nothing, whose Gaussians' colours change across it
     // (light on top, dark below, as a capture's baked shading): by colour it would measure a few
