@@ -323,6 +323,19 @@ def test_a_petiole_stroke_shifted_by_a_pixel_keeps_its_length():
     assert lengths[1] >= 0.8 * lengths[0], np.array(lengths) / case["radius"]
 
 
+def test_a_sprinkle_on_the_icings_rim_keeps_its_rod_when_the_stroke_moves_a_pixel():
+    """Held-out sprinkle d in az000 lies on the icing's rim, seen against the background beyond it:
+    the icing lies at its depth on one side only. Without the surface's colours there, its stroke
+    moved 1 px up (R estimated) traced the sprinkle's upper edge: R 0.41 x and a rod 37 % as long
+    as the stroke's as drawn. One side of the ring on the surface now finds them
+    (docs/extraction.md, "A part lying on a surface", One side on the surface)."""
+    scene, case, camera, stroke = _case_view("heldout", "donut_sprinkle_d", "az000")
+    drawn, moved = (extract_rod(scene, camera, s) for s in (stroke, stroke + [0.0, -1.0]))
+    assert 0.7 <= moved.radius / case["radius"] <= 1.4, moved.radius / case["radius"]
+    lengths = [polyline_length(rod.polyline) for rod in (drawn, moved)]
+    assert lengths[1] >= 0.75 * lengths[0], np.array(lengths) / case["radius"]
+
+
 def test_a_jittered_stroke_over_a_sprinkle_as_much_on_the_icing_finds_both_colours():
     """sprinkle_14 in az000 under a jittered stroke (the fifth draw's third, `real_case_misses.py
     --draws`) that runs 10 px past both ends: about as many of the colours near it are the icing's
