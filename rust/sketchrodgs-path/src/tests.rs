@@ -457,21 +457,31 @@ fn a_rope_lying_on_a_floor_of_big_gaussians_is_followed_by_its_colour_under_a_st
         let (x, y) = ((block % 8) as f32 * 10.0 + 5.0, (block / 8) as f32 * 10.0 + 5.0);
         scene.centres.push([x * 5.0 / FOCAL, y * 5.0 / FOCAL, 5.0]);
     }
-    let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
     let colours: Vec<[f32; 3]> = (0..scene.centres.len())
         .map(|g| if g < first_block && on_rope(g / 80) { [0.85, 0.55, 0.2] } else { [0.5, 0.45, 0.4] })
         .collect();
+    let plain = middle_rows(&traced_above_the_rope(&scene, None));
+    assert!(plain.iter().any(|&r| !on_rope(r as usize)), "without colours the path takes the floor");
+    let rows = middle_rows(&traced_above_the_rope(&scene, Some(&colours)));
+    assert!(!rows.is_empty() && rows.iter().all(|&r| on_rope(r as usize)), "rows {rows:?}");
+}
+
+/// The trace of a stroke along row 15.5 of an 80 px wide scene (4 px above a rope at rows 18..=22,
+/// R 2.5 px), with each Gaussian's colour where `colours` are given.
+fn traced_above_the_rope(scene: &Synthetic, colours: Option<&[[f32; 3]]>) -> Trace {
     let params = TraceParams { radius: 0.125, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
     let stroke = [[2.5, 15.5], [77.5, 15.5]];
-    let middle_rows = |trace: &Trace| -> Vec<u32> {
-        trace.pieces.iter().flat_map(|p| &p.pixels).filter(|p| (10..70).contains(&p[0])).map(|p| p[1]).collect()
+    let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
+    let image = match colours {
+        Some(colours) => scene.image().with_colours(&ids, colours).unwrap(),
+        None => scene.image(),
     };
-    let plain = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
-    assert!(middle_rows(&plain).iter().any(|&r| !on_rope(r as usize)), "without colours the path takes the floor");
-    let image = scene.image().with_colours(&ids, &colours).unwrap();
-    let trace = trace_stroke(&image, &scene.centres, &stroke, &params).unwrap();
-    let rows = middle_rows(&trace);
-    assert!(!rows.is_empty() && rows.iter().all(|&r| on_rope(r as usize)), "rows {rows:?}");
+    trace_stroke(&image, &scene.centres, &stroke, &params).unwrap()
+}
+
+/// The rows of a trace's pixels over columns 10..70 (away from the stroke's ends).
+fn middle_rows(trace: &Trace) -> Vec<u32> {
+    trace.pieces.iter().flat_map(|p| &p.pixels).filter(|p| (10..70).contains(&p[0])).map(|p| p[1]).collect()
 }
 
 #[test]
@@ -496,19 +506,12 @@ fn a_rope_along_the_edge_of_a_shelf_is_told_from_the_shelf_by_its_colour() {
         let (x, y) = (block as f32 * 10.0 + 5.0, 11.0);
         scene.centres.push([x * 5.0 / FOCAL, y * 5.0 / FOCAL, 5.0]);
     }
-    let ids: Vec<u32> = (0..scene.centres.len() as u32).collect();
     let (orange, grey) = ([0.85, 0.55, 0.2], [0.5, 0.45, 0.4]);
     let colours: Vec<[f32; 3]> =
         (0..scene.centres.len()).map(|g| if g < first_block { orange } else { grey }).collect();
-    let params = TraceParams { radius: 0.125, band_px: 6.0, focal_px: FOCAL, ..TraceParams::default() };
-    let stroke = [[2.5, 15.5], [77.5, 15.5]];
-    let middle_rows = |trace: &Trace| -> Vec<u32> {
-        trace.pieces.iter().flat_map(|p| &p.pixels).filter(|p| (10..70).contains(&p[0])).map(|p| p[1]).collect()
-    };
-    let plain = trace_stroke(&scene.image(), &scene.centres, &stroke, &params).unwrap();
-    assert!(middle_rows(&plain).iter().any(|&r| !on_rope(r as usize)), "without colours the path takes the shelf");
-    let image = scene.image().with_colours(&ids, &colours).unwrap();
-    let trace = trace_stroke(&image, &scene.centres, &stroke, &params).unwrap();
+    let plain = middle_rows(&traced_above_the_rope(&scene, None));
+    assert!(plain.iter().any(|&r| !on_rope(r as usize)), "without colours the path takes the shelf");
+    let trace = traced_above_the_rope(&scene, Some(&colours));
     let found = trace.colours.expect("the rope lies on the shelf");
     assert_eq!((found.part, found.surround), (orange, grey));
     let rows = middle_rows(&trace);
