@@ -459,8 +459,9 @@ const SURROUND_COST: f64 = 4.0 * WIDE_WEIGHT * WIDE_CAP as f64;
 /// The part's colour and the surround's (`two_colours`) where the part lies on a surface at its own
 /// depth: half the pixels `SURROUND_FROM_R` to `SURROUND_TO_R` radii across the clean stroke, or
 /// `ONE_SIDE_SHARE` of those on one side, show a surface within the depth gap and `SURFACE_SLOPE`
-/// times the lateral distance of the part's depth. None where colours or the focal length are unknown, the part is outlined against the
-/// background or what lies well behind it, or the two colours are alike.
+/// times the lateral distance of the part's depth. None where colours or the focal length are
+/// unknown, the part is outlined against the background or what lies well behind it, or the two
+/// colours are alike.
 fn surface_colours(
     image: &IndexImage,
     band: &Band,
