@@ -58,6 +58,22 @@ def test_a_short_axis_that_zigzags_becomes_a_parabola():
     assert distance_to(smoothed, axis).max() / R < 0.75
 
 
+def test_a_short_axis_bending_under_half_a_radius_is_straight_and_one_bent_further_keeps_its_bend():
+    # a straight sprinkle 8 R long whose few Gaussians scatter its recentred points by 0.3 R: their
+    # parabola bends by a fraction of a radius, which the axis does not keep (jittered strokes bent
+    # sprinkles' axes by 1-2 R at an end so)
+    x = np.arange(0, 8 * R + 1e-12, R / 2)
+    scatter = np.random.default_rng(3).normal(0, 0.3 * R, (len(x), 2))
+    straight = pl.smooth_axis(np.stack([x, scatter[:, 0], scatter[:, 1]], axis=1), R)
+    chord = (straight[-1] - straight[0]) / np.linalg.norm(straight[-1] - straight[0])
+    off_chord = straight - straight[0] - ((straight - straight[0]) @ chord)[:, None] * chord
+    assert np.linalg.norm(off_chord, axis=1).max() < 1e-9 * R
+    # a part 8 R long bent 2.1 R off its chord (1.4 R off its least-squares line) keeps most of it
+    u = x / (8 * R)
+    bent = np.stack([x, 8.4 * R * u * (1 - u), np.zeros_like(u)], axis=1)
+    assert distance_to(pl.smooth_axis(bent, R), bent).max() / R < 0.25
+
+
 def test_a_short_part_bent_round_keeps_its_bend():
     # three diameters round a tight curve (180 degrees over 6 R: the ring's tip), kept as it is bent
     angle = np.linspace(0, np.pi, 13)

@@ -27,6 +27,10 @@ _SHORT_AXIS_RADII = 10.0
 # ... unless its halves' chords turn by this many degrees or more (a part bent round within its few
 # radii, such as the ring's tip stroked three diameters long: 88-94 degrees; sprinkles under 40-80)
 _SHORT_AXIS_TURN = 60.0
+# ... and that parabola is its chord line where it bends less than the first of these radii off that
+# line, blended towards the parabola up to the second: so few cross-sections cannot tell a bend of
+# half a radius from their scatter, and jittered strokes bent a sprinkle's axis by 1-2 R at an end
+_SHORT_AXIS_STRAIGHT = (0.5, 1.5)
 
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
@@ -162,7 +166,8 @@ def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.nd
     does not bend the axis. The third difference leaves circular arcs alone, ends included (a
     curvature penalty would straighten the last radii of a bent part). An axis shorter than
     `_SHORT_AXIS_RADII` radii whose halves turn by less than `_SHORT_AXIS_TURN` then becomes the
-    least-squares parabola along its arc.
+    least-squares parabola along its arc, or its line where that parabola bends less than
+    `_SHORT_AXIS_STRAIGHT` radii off the line.
 
     Args:
         points: (M, 3) axis points in order, about R/2 apart.
@@ -191,9 +196,24 @@ def smooth_axis(points: np.ndarray, radius: float, length: float = 1.0) -> np.nd
         weights = np.where(residual < 1, (1 - residual**2) ** 2, 0.0) + 1e-3
     arc = arc_lengths(fit)
     if 0 < arc[-1] < _SHORT_AXIS_RADII * radius and _chord_turn(fit) < _SHORT_AXIS_TURN:
-        powers = np.vander(arc / arc[-1], 3)
-        fit = powers @ np.linalg.lstsq(powers, fit, rcond=None)[0]
+        fit = _straightened(_least_squares_along(fit, arc, 2), _least_squares_along(fit, arc, 1), radius)
     return np.asarray(fit, np.float64)
+
+
+def _least_squares_along(points: np.ndarray, arc: np.ndarray, degree: int) -> np.ndarray:
+    """The least-squares polynomial of `degree` in the arc length `arc` through `points`, at `arc`."""
+    powers = np.vander(arc / arc[-1], degree + 1)
+    return powers @ np.linalg.lstsq(powers, points, rcond=None)[0]
+
+
+def _straightened(parabola: np.ndarray, line: np.ndarray, radius: float) -> np.ndarray:
+    """A short axis's `parabola`, taken to its `line` by how little it bends off it: all the way
+    under `_SHORT_AXIS_STRAIGHT[0]` radii, not at all over `_SHORT_AXIS_STRAIGHT[1]`, in proportion
+    between (no step, so that a jittered stroke does not flip a part between the two)."""
+    low, high = _SHORT_AXIS_STRAIGHT
+    bend = float(np.linalg.norm(parabola - line, axis=1).max()) / radius
+    share = float(np.clip((bend - low) / (high - low), 0.0, 1.0))
+    return line + share * (parabola - line)
 
 
 def _chord_turn(points: np.ndarray) -> float:
