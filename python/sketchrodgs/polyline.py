@@ -27,9 +27,10 @@ _SHORT_AXIS_RADII = 10.0
 # ... unless its halves' chords turn by this many degrees or more (a part bent round within its few
 # radii, such as the ring's tip stroked three diameters long: 88-94 degrees; sprinkles under 40-80)
 _SHORT_AXIS_TURN = 60.0
-# ... and that parabola is its chord line where it bends less than the first of these radii off that
-# line, blended towards the parabola up to the second: so few cross-sections cannot tell a bend of
-# half a radius from their scatter, and jittered strokes bent a sprinkle's axis by 1-2 R at an end
+# ... and that parabola is the least-squares line along the arc where it bends less than the first of
+# these radii off that line, blended towards the parabola up to the second: so few cross-sections
+# cannot tell a bend of half a radius from their scatter (jittered strokes bent a straight
+# sprinkle's axis by 1-2 R at an end; docs/extraction.md, "Polyline, segmentation, binding")
 _SHORT_AXIS_STRAIGHT = (0.5, 1.5)
 
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
