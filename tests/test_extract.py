@@ -421,7 +421,10 @@ def straight_scene():
         ([[10.0, 10.0]], SketchRodGSError, "at least 2 points"),
         ([[1.0, np.nan], [5.0, 5.0]], SketchRodGSError, "point 0 is not finite"),
         ([[-50.0, -50.0], [-10.0, -20.0]], SketchRodGSError, "2 outside the image"),
-        ([[10.0, 10.0], [100.0, 10.0]], PathNotFoundError, "background"),
+        ([[10.0, 10.0], [100.0, 10.0]], PathNotFoundError, "entirely on background"),
+        # its points outside the image are said to be outside it, not on background (both ways)
+        ([[10.0, 10.0], [100.0, 10.0], [-80.0, 10.0]], PathNotFoundError, "1 of its points lies outside the image"),
+        ([[-9.0, 10.0], [100.0, 10.0], [2000.0, 9.0]], PathNotFoundError, "inside the 960x540 image .* 2 of its"),
         (np.zeros((3, 3)), SketchRodGSError, "expected shape"),
         # far out: an error naming the image, not a panic asking for 1e19 samples
         (np.array([[10.0, 10.0], [100.0, 10.0]]) * 1e20, SketchRodGSError, "0 .2 outside the image"),

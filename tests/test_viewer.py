@@ -403,6 +403,8 @@ def test_failures_speak_of_the_stroke_not_of_pixels():
 
     text = describe_failure(PathNotFoundError("the stroke is entirely on background (alpha < 0.5) at px (3, 4)"))
     assert "on the background" in text and "px" not in text and "alpha" not in text
+    leaving = "stroke lies on background inside the 960x540 image (no Gaussian near its points there), and 1 of"
+    assert describe_failure(PathNotFoundError(leaving)) == text
     assert "bug" in describe_failure(RuntimeError("boom"))
 
 

@@ -26,7 +26,7 @@ SECONDS: dict[Kind, float | None] = {"info": 5.0, "busy": None, "done": 6.0, "er
 # What the path search reports, said in terms of the stroke the user drew (the messages of
 # rust/sketchrodgs-path and extract.py speak of the render's pixels and of CLI options).
 FAILURES = (
-    ("entirely on background", "The stroke is on the background: draw it over the object."),
+    ("on background", "The stroke is on the background: draw it over the object."),
     ("meets an object at only", "The stroke barely touches an object: draw it along the part, from end to end."),
     ("needs at least 2 distinct points", "The stroke is too short: drag along the part, from end to end."),
     ("single point", "The stroke is a single point: drag along the part, from end to end."),

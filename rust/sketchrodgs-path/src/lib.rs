@@ -47,8 +47,8 @@ pub enum PathError {
         "stroke needs at least 2 distinct points inside the {width}x{height} image, got {inside} ({outside} outside the image)"
     )]
     StrokeTooShort { inside: usize, outside: usize, width: usize, height: usize },
-    #[error("stroke lies entirely on background (no Gaussian near any of its points): draw it over the object")]
-    StrokeOnBackground,
+    #[error("{}: draw it over the object", on_background(*outside, *width, *height))]
+    StrokeOnBackground { outside: usize, width: usize, height: usize },
     #[error("the stroke meets an object at only {samples} of its samples: draw it along the object, end to end")]
     StrokeBarelyOnObject { samples: usize },
     #[error("rendered tiles: expected {grid_x}x{grid_y} tiles, got {tiles}")]
@@ -71,6 +71,19 @@ pub enum PathError {
         "{image}: the depth at pixel ({col}, {row}) is {depth} where a Gaussian is shown; it must be finite and > 0"
     )]
     BadDepth { image: String, col: usize, row: usize, depth: f32 },
+}
+
+/// Where a stroke on background lies: its points outside the image are said to be outside it, not
+/// on background (docs/extraction.md, "Failures").
+fn on_background(outside: usize, width: usize, height: usize) -> String {
+    match outside {
+        0 => "stroke lies entirely on background (no Gaussian near any of its points)".to_string(),
+        _ => format!(
+            "stroke lies on background inside the {width}x{height} image (no Gaussian near its points there), \
+             and {outside} of its points {} outside the image",
+            if outside == 1 { "lies" } else { "lie" }
+        ),
+    }
 }
 
 /// An error naming the first pixel (of the layers behind if `layers`) where `index` shows a

@@ -4,7 +4,7 @@
 use std::ops::Range;
 
 use crate::search::WALK_RADII;
-use crate::stroke::{CleanStroke, clean_stroke};
+use crate::stroke::{CleanStroke, clean_stroke, on_background};
 use crate::width::{Walks, colour_distance, median, median_colour};
 use crate::{IndexImage, PathError, TraceParams};
 
@@ -90,7 +90,7 @@ pub fn estimate_radius(
     }
     let (first, _) = half_widths(image, &loose, &under, focal, max_px, None, None);
     let gap_at = |r: f32| crate::depth_gap(image, stroke, r, focal);
-    let Some(rough) = slender_cluster(&first, gap_at) else { return Err(PathError::StrokeOnBackground) };
+    let Some(rough) = slender_cluster(&first, gap_at) else { return Err(on_background(image, stroke)) };
     // pass 2: the depth-consistent chain at that radius
     let gap = gap_at(rough);
     // Whether the chain runs behind what is in front is decided as the search decides it, with

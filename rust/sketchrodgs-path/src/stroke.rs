@@ -180,6 +180,13 @@ struct Candidate {
     wide: f32,
 }
 
+/// The error for a stroke with no surface near any of its samples, counting its points outside the
+/// image, which are not on background (docs/extraction.md, "Failures").
+pub(crate) fn on_background(image: &IndexImage, stroke: &[[f32; 2]]) -> PathError {
+    let outside = stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count();
+    PathError::StrokeOnBackground { outside, width: image.width, height: image.height }
+}
+
 /// Clip, resample, smooth, and choose the depth chain. `reach_px` is how far from a sample a
 /// surface may be (the band half-width); `depth_gap` is `3R`; `focal_px` turns pixels of stroke
 /// into lateral distance (0: unknown, then the allowed change stays `3R`); `slender_radius` `R`, if
@@ -248,7 +255,7 @@ pub(crate) fn clean_stroke(
     if chain.len() < 2 {
         let on_object = candidates.iter().filter(|c| !c.is_empty()).count();
         return Err(if on_object == 0 {
-            PathError::StrokeOnBackground
+            on_background(image, stroke)
         } else {
             PathError::StrokeBarelyOnObject { samples: on_object }
         });

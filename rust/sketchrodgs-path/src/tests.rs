@@ -206,7 +206,8 @@ fn an_end_on_a_neighbour_at_another_depth_is_trimmed() {
 fn a_stroke_touching_the_object_once_is_a_clear_error() {
     let scene = Synthetic::new(80, 40, FOCAL, rope);
     let err = scene.trace(&[[40.5, 2.5], [40.5, 3.5]], 0.05).unwrap_err();
-    assert_eq!(err, PathError::StrokeOnBackground);
+    assert_eq!(err, PathError::StrokeOnBackground { outside: 0, width: 80, height: 40 });
+    assert!(err.to_string().contains("entirely on background"), "{err}");
     assert!(err.to_string().contains("draw it over the object"));
 }
 
@@ -224,7 +225,12 @@ fn bad_strokes_and_parameters_are_errors() {
     let across = scene.trace(&[[-5.0, 20.5], [100.0, 20.5]], 0.05).unwrap();
     assert_eq!(across.pieces[0].pixels.first().unwrap()[0], 0);
     let background = scene.trace(&[[2.5, 2.5], [77.5, 2.5]], 0.05).unwrap_err();
-    assert_eq!(background, PathError::StrokeOnBackground);
+    assert_eq!(background, PathError::StrokeOnBackground { outside: 0, width: 80, height: 40 });
+    // reaching out of the image over background: its points outside are said to be outside
+    let leaving = scene.trace(&[[2.5, 2.5], [77.5, 2.5], [120.0, 2.5]], 0.05).unwrap_err();
+    assert_eq!(leaving, PathError::StrokeOnBackground { outside: 1, width: 80, height: 40 });
+    let text = leaving.to_string();
+    assert!(text.contains("inside the 80x40 image") && text.contains("1 of its points lies outside"), "{text}");
     for radius in [0.0, -1.0, f32::NAN] {
         assert!(matches!(
             scene.trace(&[[2.5, 20.5], [77.5, 20.5]], radius),
@@ -402,7 +408,7 @@ fn a_stroke_just_off_the_ropes_silhouette_measures_the_rope() {
     assert!((radius - 0.075).abs() < 0.01, "R = {radius}");
     // beyond the band it is on the background
     let far = estimate_radius(&scene.image(), &[[2.5, 30.5], [77.5, 30.5]], &params);
-    assert_eq!(far.unwrap_err(), PathError::StrokeOnBackground);
+    assert_eq!(far.unwrap_err(), PathError::StrokeOnBackground { outside: 0, width: 80, height: 40 });
 }
 
 #[test]

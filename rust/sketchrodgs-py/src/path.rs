@@ -14,9 +14,9 @@ use crate::pool::run_parallel;
 
 fn path_err(err: PathError) -> PyErr {
     match err {
-        PathError::StrokeOnBackground | PathError::StrokeBarelyOnObject { .. } | PathError::StrokeTooShort { .. } => {
-            PathNotFoundError::new_err(err.to_string())
-        }
+        PathError::StrokeOnBackground { .. }
+        | PathError::StrokeBarelyOnObject { .. }
+        | PathError::StrokeTooShort { .. } => PathNotFoundError::new_err(err.to_string()),
         _ => SketchRodGSError::new_err(err.to_string()),
     }
 }
