@@ -37,9 +37,10 @@ RADIUS_MISSES = {
     "tree_twig_v/az000/yaw+60",
     "tree_branch_centre/az000/yaw+30",
     "tree_branch_lower_left/az045/yaw+60",
-    # a sprinkle seen from above at its end: measured across its colour from the path, 0.63
-    # (docs/extraction.md, "A part lying on a surface")
-    "donut_sprinkle_a/az270/pitch+20",
+    # a sprinkle seen end-on at the donut's silhouette beside another of its colour, 46 % seen:
+    # measured across the blue of both from the path, 1.60 (docs/extraction.md, "A part lying on a
+    # surface"; 0.76 while the path's pixels on the icing past its end were measured too)
+    "donut_sprinkle_b/az270/yaw+60",
 }
 # (the branch's forked end seen across its two prongs, where the rod with R estimated ran over
 # both, no longer folds: its hooked end is cut, docs/extraction.md "Polyline")

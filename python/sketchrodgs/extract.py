@@ -699,10 +699,16 @@ def _radius_by_colour(
     Gaussian nearer the surface's colour than the part's (at most 1/8 of the image each way); R is
     the median half-width in world units. The radius estimate walks from the stroke's samples, which
     a stroke drawn beside the part puts on the surface, and stops by a colour taken under the
-    stroke; the path keeps to the part (docs/extraction.md, "A part lying on a surface")."""
+    stroke; the path keeps to the part (docs/extraction.md, "A part lying on a surface"). Only the
+    path pixels that show a Gaussian of the part's colour are measured from: a stroke drawn on past
+    the part's end takes the path over the surface there, and each such pixel measured 0.5 px."""
     pixels = np.concatenate([p.pixels.astype(np.int64) for p in trace.pieces])
     clean = np.asarray(trace.clean_stroke, np.float64)
     if trace.colours is None or len(clean) < 2 or len(pixels) == 0:
+        return None
+    shown = index[pixels[:, 1], pixels[:, 0]]
+    pixels = pixels[(shown >= 0) & _part_coloured(scene.colors_of(np.maximum(shown, 0)), trace.colours)]
+    if len(pixels) == 0:
         return None
     tangent = np.gradient(clean, axis=0)
     normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
