@@ -47,7 +47,7 @@ pub enum PathError {
         "stroke needs at least 2 distinct points inside the {width}x{height} image, got {inside} ({outside} outside the image)"
     )]
     StrokeTooShort { inside: usize, outside: usize, width: usize, height: usize },
-    #[error("{}: draw it over the object", on_background(*outside, *width, *height))]
+    #[error("{}: draw it over the object", background_message(*outside, *width, *height))]
     StrokeOnBackground { outside: usize, width: usize, height: usize },
     #[error("the stroke meets an object at only {samples} of its samples: draw it along the object, end to end")]
     StrokeBarelyOnObject { samples: usize },
@@ -75,7 +75,7 @@ pub enum PathError {
 
 /// Where a stroke on background lies: its points outside the image are said to be outside it, not
 /// on background (docs/extraction.md, "Failures").
-fn on_background(outside: usize, width: usize, height: usize) -> String {
+fn background_message(outside: usize, width: usize, height: usize) -> String {
     match outside {
         0 => "stroke lies entirely on background (no Gaussian near any of its points)".to_string(),
         _ => format!(

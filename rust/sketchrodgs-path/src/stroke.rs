@@ -183,8 +183,12 @@ struct Candidate {
 /// The error for a stroke with no surface near any of its samples, counting its points outside the
 /// image, which are not on background (docs/extraction.md, "Failures").
 pub(crate) fn on_background(image: &IndexImage, stroke: &[[f32; 2]]) -> PathError {
-    let outside = stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count();
-    PathError::StrokeOnBackground { outside, width: image.width, height: image.height }
+    PathError::StrokeOnBackground { outside: points_outside(image, stroke), width: image.width, height: image.height }
+}
+
+/// How many of `stroke`'s points lie outside the image.
+fn points_outside(image: &IndexImage, stroke: &[[f32; 2]]) -> usize {
+    stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count()
 }
 
 /// Clip, resample, smooth, and choose the depth chain. `reach_px` is how far from a sample a
@@ -205,7 +209,7 @@ pub(crate) fn clean_stroke(
     // resample first, so that a segment reaching in from outside the image keeps its inside part
     let dense = resample(stroke, image.width, image.height);
     let inside: Vec<[f32; 2]> = dense.into_iter().filter(|p| image.pixel_at(p[0], p[1]).is_some()).collect();
-    let outside = stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count();
+    let outside = points_outside(image, stroke);
     let too_short = |inside| PathError::StrokeTooShort { inside, outside, width: image.width, height: image.height };
     if inside.len() < 2 {
         return Err(too_short(stroke.len() - outside));
