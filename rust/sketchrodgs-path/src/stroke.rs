@@ -14,6 +14,14 @@ use crate::{FLOOR_CELL, IndexImage, PathError};
 
 /// Spacing of the resampled stroke, in pixels.
 const SAMPLE_PX: f32 = 3.0;
+/// Points this many apart measure the step between a stroke's points, for its noise
+/// (`averaged_over_noise`): far enough apart that the noise adds little to their distance.
+const NOISE_STEP_SPAN: usize = 8;
+/// A stroke of fewer points does not measure its noise (a few second differences, most of them
+/// the stroke's own bends): a stroke of a few points drawn by hand stays as it is.
+const NOISE_MIN_POINTS: usize = 16;
+/// ... and is averaged over a standard deviation of at most this many points.
+const NOISE_MAX_POINTS: f64 = 64.0;
 /// Standard deviation of the Gaussian smoothing along the stroke, in pixels of arc. It takes out
 /// hand jitter between the points a user drew; curves of the object are far wider than this.
 const SMOOTH_SIGMA_PX: f32 = 6.0;
@@ -207,7 +215,7 @@ pub(crate) fn clean_stroke(
         return Err(PathError::NonFiniteStroke { vertex });
     }
     // resample first, so that a segment reaching in from outside the image keeps its inside part
-    let dense = resample(stroke, image.width, image.height);
+    let dense = sample(&averaged_over_noise(&thinned(stroke)), image.width, image.height);
     let inside: Vec<[f32; 2]> = dense.into_iter().filter(|p| image.pixel_at(p[0], p[1]).is_some()).collect();
     let outside = points_outside(image, stroke);
     let too_short = |inside| PathError::StrokeTooShort { inside, outside, width: image.width, height: image.height };
@@ -597,14 +605,17 @@ fn is_the_part_going_on(
 }
 
 /// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed, on
-/// the image (`width` x `height` pixels) only: the samples of a segment are those of the whole
-/// segment that lie within `SAMPLE_PX` of the image, so a stroke reaching far outside costs no more
-/// than its part inside (a stroke 1e20 pixels long asked for more samples than memory holds).
-/// A point closer than `SAMPLE_PX / 2` to the last one kept is skipped (the stroke's last point
-/// takes the place of the last one kept): a stroke of one point per tenth of a pixel, as a tablet
-/// can give, is sampled as one of points a few pixels apart is, not 30 times as densely (with a
-/// 200 px band that took 73 s).
+/// the image (`width` x `height` pixels) only: `sample` of `thinned`.
+#[cfg(test)]
 fn resample(stroke: &[[f32; 2]], width: usize, height: usize) -> Vec<[f32; 2]> {
+    sample(&thinned(stroke), width, height)
+}
+
+/// The stroke without points closer than `SAMPLE_PX / 2` to the last one kept (the stroke's last
+/// point takes the place of the last one kept): a stroke of one point per tenth of a pixel, as a
+/// tablet can give, is sampled as one of points a few pixels apart is, not 30 times as densely
+/// (with a 200 px band that took 73 s).
+fn thinned(stroke: &[[f32; 2]]) -> Vec<[f32; 2]> {
     let mut vertices: Vec<[f32; 2]> = Vec::with_capacity(stroke.len());
     for (i, &p) in stroke.iter().enumerate() {
         let close = vertices.last().is_some_and(|q: &[f32; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) < 0.5 * SAMPLE_PX);
@@ -615,6 +626,60 @@ fn resample(stroke: &[[f32; 2]], width: usize, height: usize) -> Vec<[f32; 2]> {
             *kept = p;
         }
     }
+    vertices
+}
+
+/// The stroke's points averaged over their noise where they lie closer together than it
+/// (docs/extraction.md, "Stroke clean-up", **Points closer than their noise**): each interior
+/// point becomes the Gaussian-weighted mean of its neighbours by index, with a standard deviation
+/// of `(noise / step)^2 - 1` points, the window shrinking symmetrically at the ends, which stay.
+/// The noise is estimated from the points' second differences (their median norm over
+/// `sqrt(6) sqrt(2 ln 2)`, that of two-axis Gaussian noise), the step from the distance between
+/// points `NOISE_STEP_SPAN` apart (a curve's step a little short). A stroke drawn by hand, sparse
+/// or dense, has a noise well under its step and stays as it is, to the bit, and so does one of
+/// fewer than `NOISE_MIN_POINTS` points.
+fn averaged_over_noise(points: &[[f32; 2]]) -> Vec<[f32; 2]> {
+    let n = points.len();
+    if n < NOISE_MIN_POINTS {
+        return points.to_vec();
+    }
+    let p: Vec<[f64; 2]> = points.iter().map(|q| [f64::from(q[0]), f64::from(q[1])]).collect();
+    let norm = |a: [f64; 2]| a[0].hypot(a[1]);
+    // in f64, so that no difference of finite points overflows; a median too big for f32 is inf
+    let mut bends: Vec<f32> = p
+        .windows(3)
+        .map(|w| norm([w[0][0] - 2.0 * w[1][0] + w[2][0], w[0][1] - 2.0 * w[1][1] + w[2][1]]) as f32)
+        .collect();
+    let span = NOISE_STEP_SPAN.min(n - 1);
+    let mut steps: Vec<f32> =
+        p.iter().zip(&p[span..]).map(|(a, b)| (norm([b[0] - a[0], b[1] - a[1]]) / span as f64) as f32).collect();
+    let noise = f64::from(median(&mut bends)) / (6.0_f64.sqrt() * (2.0 * std::f64::consts::LN_2).sqrt());
+    let step = f64::from(median(&mut steps));
+    if !(noise.is_finite() && step.is_finite() && noise > step) {
+        return points.to_vec();
+    }
+    // in points: the noise of the mean falls to about half a step (a stroke of pure noise, drawn
+    // nowhere, is averaged over `NOISE_MAX_POINTS` at most, so that its cost stays linear)
+    let sigma = ((noise / step).powi(2) - 1.0).min(NOISE_MAX_POINTS);
+    (0..n)
+        .map(|i| {
+            let half = (3.0 * sigma).min(i as f64).min((n - 1 - i) as f64).floor() as usize;
+            let (mut sum, mut weight) = ([0.0_f64; 2], 0.0_f64);
+            for (j, q) in p.iter().enumerate().take(i + half + 1).skip(i - half) {
+                let w = (-0.5 * ((j as f64 - i as f64) / sigma).powi(2)).exp();
+                sum = [sum[0] + w * q[0], sum[1] + w * q[1]];
+                weight += w;
+            }
+            [(sum[0] / weight) as f32, (sum[1] / weight) as f32]
+        })
+        .collect()
+}
+
+/// Points every `SAMPLE_PX` along the polyline `vertices` (kept), on the image (`width` x `height`
+/// pixels) only: the samples of a segment are those of the whole segment that lie within
+/// `SAMPLE_PX` of the image, so a stroke reaching far outside costs no more than its part inside
+/// (a stroke 1e20 pixels long asked for more samples than memory holds).
+fn sample(vertices: &[[f32; 2]], width: usize, height: usize) -> Vec<[f32; 2]> {
     let Some(&first) = vertices.first() else { return Vec::new() };
     let (low, high) = ([-SAMPLE_PX as f64; 2], [width as f64 + SAMPLE_PX as f64, height as f64 + SAMPLE_PX as f64]);
     let mut out = vec![first];
@@ -940,6 +1005,44 @@ mod tests {
         assert!((20..=45).contains(&samples.len()), "{} samples", samples.len());
         // 1e20 px long: the samples on the image and a little around it only
         assert!(resample(&[[10.0, 10.0], [1e20, 10.0]], 64, 48).len() < 100);
+    }
+
+    #[test]
+    fn points_closer_than_their_noise_are_averaged_and_a_drawn_stroke_is_not() {
+        let mut next = numbers_below(5);
+        let mut gaussian = move || {
+            // Box-Muller from two uniform numbers in (0, 1]
+            let (u, v) = ((1 + next(1 << 20)) as f32 / (1 << 20) as f32, next(1 << 20) as f32 / (1 << 20) as f32);
+            (-2.0 * u.ln()).sqrt() * (std::f32::consts::TAU * v).cos()
+        };
+        let off_line =
+            |points: &[[f32; 2]]| points.iter().map(|p| (p[1] - 100.0).abs()).sum::<f32>() / points.len() as f32;
+        // 50 points 3 px apart along y = 100, 6 px of noise on each: a zigzag across a stem
+        let noisy: Vec<[f32; 2]> =
+            (0..50).map(|i| [10.0 + 3.0 * i as f32 + 6.0 * gaussian(), 100.0 + 6.0 * gaussian()]).collect();
+        let averaged = averaged_over_noise(&noisy);
+        assert_eq!((averaged[0], averaged[49]), (noisy[0], noisy[49]), "the ends stay");
+        assert!(
+            off_line(&averaged) < 0.45 * off_line(&noisy),
+            "{} px off the line, {} before",
+            off_line(&averaged),
+            off_line(&noisy)
+        );
+        // the same noise on points 15 px apart (drawn by hand, jittered), a few of them, a dense
+        // stroke drawn without noise (a mouse's pixels) and a dense circle stay to the bit
+        let sparse: Vec<[f32; 2]> =
+            (0..30).map(|i| [10.0 + 15.0 * i as f32 + 6.0 * gaussian(), 100.0 + 6.0 * gaussian()]).collect();
+        let pixels: Vec<[f32; 2]> =
+            (0..80).map(|i| [10.0 + 2.0 * i as f32, (100.0 + 0.37 * i as f32).round()]).collect();
+        let circle: Vec<[f32; 2]> = (0..100)
+            .map(|i| [100.0 + 40.0 * (i as f32 * 0.06).cos(), 100.0 + 40.0 * (i as f32 * 0.06).sin()])
+            .collect();
+        for stroke in [&sparse, &sparse[..12].to_vec(), &pixels, &circle] {
+            assert_eq!(&averaged_over_noise(stroke), stroke);
+        }
+        // points too far apart for f32 differences: left as they are, never NaN
+        let huge: Vec<[f32; 2]> = (0..20).map(|i| [if i % 2 == 0 { 3e38 } else { -3e38 }, i as f32]).collect();
+        assert_eq!(averaged_over_noise(&huge), huge);
     }
 
     /// A repeatable stream of numbers: each call gives one below its argument.
