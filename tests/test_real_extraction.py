@@ -591,13 +591,13 @@ def _points_every(stroke: np.ndarray, px: float) -> np.ndarray:
     return np.column_stack([np.interp(at, arc, stroke[:, 0]), np.interp(at, arc, stroke[:, 1])])
 
 
-@pytest.mark.parametrize("name, view_name", [("plant_side_stem_left", "az045"), ("plant_side_stem_right", "az045")])
+@pytest.mark.parametrize("name, view_name", [("plant_main_stem", "az045"), ("plant_side_stem_left", "az045")])
 def test_jittered_strokes_of_points_closer_than_their_noise_give_the_rod_as_drawn(name, view_name):
     """The issue's jitter (3-8 px of noise on every point) on a stroke given as points 4 px apart
     makes a zigzag across the stem. Its points are now averaged over their noise (docs/extraction.md,
-    "Stroke clean-up", **Points closer than their noise**): before, 4 of the left side stem's 10
-    jittered rods lay 1.47-1.56 R from the rod as drawn and one of the right side stem's 3.11 R
-    (a rod onto the leaf beside it); now every one lies within 1.22 R."""
+    "Stroke clean-up", **Points closer than their noise**): before, a jittered rod of the main stem
+    lay 2.54 R from the rod as drawn and 4 of the left side stem's 1.47-1.56 R; now every one lies
+    within 0.83 R."""
     scene, case, camera, stroke = _case_view("cases", name, view_name)
     radius = case["radius"]
     dense = _points_every(stroke, 4.0)
@@ -605,4 +605,4 @@ def test_jittered_strokes_of_points_closer_than_their_noise_give_the_rod_as_draw
     drawn = extract_rod(scene, camera, dense, radius=radius, render=images)
     for jittered in jittered_strokes(dense, count=JITTER, seed=jitter_seed(name, view_name)):
         rod = extract_rod(scene, camera, jittered, radius=radius, render=images)
-        assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= 1.4
+        assert polyline_agreement(drawn.polyline, rod.polyline, radius)["max"] <= 1.2

@@ -20,7 +20,11 @@ const NOISE_STEP_SPAN: usize = 8;
 /// A stroke of fewer points does not measure its noise (a few second differences, most of them
 /// the stroke's own bends): a stroke of a few points drawn by hand stays as it is.
 const NOISE_MIN_POINTS: usize = 16;
-/// ... and is averaged over a standard deviation of at most this many points.
+/// A stroke is averaged where its noise exceeds this share of the step between its points ...
+const NOISE_ONSET: f64 = 0.5;
+/// ... over a standard deviation of about this many times its noise, in pixels along the stroke ...
+const NOISE_WINDOW: f64 = 3.0;
+/// ... and of at most this many points.
 const NOISE_MAX_POINTS: f64 = 64.0;
 /// Standard deviation of the Gaussian smoothing along the stroke, in pixels of arc. It takes out
 /// hand jitter between the points a user drew; curves of the object are far wider than this.
@@ -629,10 +633,11 @@ fn thinned(stroke: &[[f32; 2]]) -> Vec<[f32; 2]> {
     vertices
 }
 
-/// The stroke's points averaged over their noise where they lie closer together than it
+/// The stroke's points averaged over their noise where they lie closer together than twice it
 /// (docs/extraction.md, "Stroke clean-up", **Points closer than their noise**): each interior
 /// point becomes the Gaussian-weighted mean of its neighbours by index, with a standard deviation
-/// of `(noise / step)^2 - 1` points, the window shrinking symmetrically at the ends, which stay.
+/// of `3 sqrt(noise^2 - (step / 2)^2) / step` points, the window shrinking symmetrically at the
+/// ends, which stay.
 /// The noise is estimated from the points' second differences (their median norm over
 /// `sqrt(6) sqrt(2 ln 2)`, that of two-axis Gaussian noise), the step from the distance between
 /// points `NOISE_STEP_SPAN` apart (a curve's step a little short). A stroke drawn by hand, sparse
@@ -655,12 +660,13 @@ fn averaged_over_noise(points: &[[f32; 2]]) -> Vec<[f32; 2]> {
         p.iter().zip(&p[span..]).map(|(a, b)| (norm([b[0] - a[0], b[1] - a[1]]) / span as f64) as f32).collect();
     let noise = f64::from(median(&mut bends)) / (6.0_f64.sqrt() * (2.0 * std::f64::consts::LN_2).sqrt());
     let step = f64::from(median(&mut steps));
-    if !(noise.is_finite() && step.is_finite() && noise > step) {
+    let onset = NOISE_ONSET * step;
+    if !(noise.is_finite() && step.is_finite() && noise > onset) {
         return points.to_vec();
     }
-    // in points: the noise of the mean falls to about half a step (a stroke of pure noise, drawn
-    // nowhere, is averaged over `NOISE_MAX_POINTS` at most, so that its cost stays linear)
-    let sigma = ((noise / step).powi(2) - 1.0).min(NOISE_MAX_POINTS);
+    // in points: nothing at the onset, `NOISE_WINDOW` times the noise well past it (a stroke of pure
+    // noise, drawn nowhere, is averaged over `NOISE_MAX_POINTS` at most, so its cost stays linear)
+    let sigma = (NOISE_WINDOW * (noise * noise - onset * onset).sqrt() / step).min(NOISE_MAX_POINTS);
     (0..n)
         .map(|i| {
             let half = (3.0 * sigma).min(i as f64).min((n - 1 - i) as f64).floor() as usize;
@@ -1023,15 +1029,15 @@ mod tests {
         let averaged = averaged_over_noise(&noisy);
         assert_eq!((averaged[0], averaged[49]), (noisy[0], noisy[49]), "the ends stay");
         assert!(
-            off_line(&averaged) < 0.45 * off_line(&noisy),
+            off_line(&averaged) < 0.35 * off_line(&noisy),
             "{} px off the line, {} before",
             off_line(&averaged),
             off_line(&noisy)
         );
-        // the same noise on points 15 px apart (drawn by hand, jittered), a few of them, a dense
+        // the same noise on points 25 px apart (drawn by hand, jittered), a few of them, a dense
         // stroke drawn without noise (a mouse's pixels) and a dense circle stay to the bit
         let sparse: Vec<[f32; 2]> =
-            (0..30).map(|i| [10.0 + 15.0 * i as f32 + 6.0 * gaussian(), 100.0 + 6.0 * gaussian()]).collect();
+            (0..30).map(|i| [10.0 + 25.0 * i as f32 + 6.0 * gaussian(), 100.0 + 6.0 * gaussian()]).collect();
         let pixels: Vec<[f32; 2]> =
             (0..80).map(|i| [10.0 + 2.0 * i as f32, (100.0 + 0.37 * i as f32).round()]).collect();
         let circle: Vec<[f32; 2]> = (0..100)
