@@ -608,13 +608,6 @@ fn is_the_part_going_on(
         && run.iter().all(|m| m.1.depth >= trend.depth_at(arc[m.0]) - OCCLUDER_SHORT_STEP * depth_gap)
 }
 
-/// Points every `SAMPLE_PX` along the polyline (its vertices kept), repeated points removed, on
-/// the image (`width` x `height` pixels) only: `sample` of `thinned`.
-#[cfg(test)]
-fn resample(stroke: &[[f32; 2]], width: usize, height: usize) -> Vec<[f32; 2]> {
-    sample(&thinned(stroke), width, height)
-}
-
 /// The stroke without points closer than `SAMPLE_PX / 2` to the last one kept (the stroke's last
 /// point takes the place of the last one kept): a stroke of one point per tenth of a pixel, as a
 /// tablet can give, is sampled as one of points a few pixels apart is, not 30 times as densely
@@ -970,7 +963,7 @@ mod tests {
         chain
     }
 
-    /// The samples of `resample` before it was kept to the image: every segment sampled whole.
+    /// The samples of `sample` before they were kept to the image: every segment sampled whole.
     fn resample_whole(stroke: &[[f32; 2]]) -> Vec<[f32; 2]> {
         let mut out = vec![stroke[0]];
         for w in stroke.windows(2) {
@@ -999,18 +992,18 @@ mod tests {
             if stroke.windows(2).any(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]) < 0.5 * SAMPLE_PX) {
                 continue; // thinned: not the same vertices
             }
-            let kept: Vec<[f32; 2]> = resample(&stroke, 64, 48).iter().filter(on_image).copied().collect();
+            let kept: Vec<[f32; 2]> = sample(&thinned(&stroke), 64, 48).iter().filter(on_image).copied().collect();
             let whole: Vec<[f32; 2]> = resample_whole(&stroke).iter().filter(on_image).copied().collect();
             assert_eq!(kept, whole);
         }
         // 0.1 px apart: samples 1.5 px apart, where a stroke of two points has them 3 px apart
         let dense: Vec<[f32; 2]> = (0..=600).map(|i| [i as f32 * 0.1, 10.0]).collect();
-        let samples = resample(&dense, 64, 48);
+        let samples = sample(&thinned(&dense), 64, 48);
         assert_eq!(samples.first(), Some(&[0.0, 10.0]));
         assert_eq!(samples.last(), dense.last());
         assert!((20..=45).contains(&samples.len()), "{} samples", samples.len());
         // 1e20 px long: the samples on the image and a little around it only
-        assert!(resample(&[[10.0, 10.0], [1e20, 10.0]], 64, 48).len() < 100);
+        assert!(sample(&thinned(&[[10.0, 10.0], [1e20, 10.0]]), 64, 48).len() < 100);
     }
 
     #[test]
