@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sketchrodgs.consistency import jaccard, jittered_strokes, polyline_agreement, reversed_stroke
+from sketchrodgs.consistency import (
+    farthest_shared_point,
+    jaccard,
+    jittered_strokes,
+    polyline_agreement,
+    reversed_stroke,
+)
 
 R = 0.01
 
@@ -53,6 +59,23 @@ def test_max_sees_a_local_bump() -> None:
     out = polyline_agreement(line(0, 1), bumped, R)
     assert out["max"] == pytest.approx(2.0, rel=1e-3)
     assert 0 < out["mean"] < 0.1
+
+
+def test_the_farthest_point_says_which_rod_and_where_along_it() -> None:
+    # a hook: b turns where a ends and runs 10 R back beside a, 3 to 6 R to its side
+    straight = line(0, 0.8, n=81)
+    hooked = np.concatenate([line(0, 0.8, n=81), [[0.8, 0.03, 0.0], [0.7, 0.06, 0.0]]])
+    which, from_end, distance = farthest_shared_point(straight, hooked, R)
+    assert (which, distance) == (1, pytest.approx(polyline_agreement(straight, hooked, R)["max"]))
+    assert from_end < 0.5 and distance == pytest.approx(6.0, rel=1e-3)
+    # a bump in the middle of a: far from either of its ends
+    bumped = line(0, 1, n=101)
+    bumped[50, 1] = 2 * R
+    which, from_end, distance = farthest_shared_point(bumped, line(0, 1), R)
+    half = np.linalg.norm(np.diff(bumped, axis=0), axis=1).sum() / 2 / R  # 51.2 R: the bump's two sides
+    assert which == 0 and from_end == pytest.approx(half, abs=0.25) and distance == pytest.approx(2.0, rel=1e-3)
+    # no shared arc: nowhere
+    assert farthest_shared_point(line(0, 1), np.array([[0.0, 0.5, 0.0], [0.0, 0.8, 0.0]]), R) is None
 
 
 def test_disjoint_polylines_have_no_overlap() -> None:

@@ -8,6 +8,7 @@ extracted, so they can judge any extraction method.
 - `jittered_strokes(stroke)`: strokes like one a user might draw over the same part again (pixel
   noise, dropped points, ends a little short or long).
 - `reversed_stroke(stroke)`: the same stroke drawn from the other end.
+- `farthest_shared_point(a, b, radius)`: where the first measure's max lies (a rod's end or middle).
 - `jaccard(ids_a, ids_b)`: overlap of two sets of Gaussian indices (e.g. the segmented Gaussians).
 """
 
@@ -104,17 +105,7 @@ def polyline_agreement(a: np.ndarray, b: np.ndarray, radius: float) -> dict[str,
     Raises:
         ValueError: bad shapes, non-finite values or a radius that is not > 0.
     """
-    a = _as_polyline(a, 3, "a")
-    b = _as_polyline(b, 3, "b")
-    if not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius: must be finite and > 0, got {radius}")
-    samples = []
-    for poly in (a, b):
-        length = arc_lengths(poly)[-1]
-        count = int(np.clip(np.ceil(length / (SAMPLE_SPACING * radius)) + 1, MIN_SAMPLES, MAX_SAMPLES))
-        samples.append(_resample(poly, count))
-    dist_ab, in_ab = _directed(samples[0], b)
-    dist_ba, in_ba = _directed(samples[1], a)
+    (dist_ab, in_ab, along_a), (dist_ba, in_ba, along_b) = _shared_distances(a, b, radius)
     means, maxima = [], []
     for dist, inside in ((dist_ab, in_ab), (dist_ba, in_ba)):
         if inside.any():
@@ -123,12 +114,42 @@ def polyline_agreement(a: np.ndarray, b: np.ndarray, radius: float) -> dict[str,
         else:
             means.append(np.inf)
             maxima.append(np.inf)
-    shorter_inside = in_ab if arc_lengths(a)[-1] <= arc_lengths(b)[-1] else in_ba
+    shorter_inside = in_ab if along_a[-1] <= along_b[-1] else in_ba
     return {
         "mean": 0.5 * (means[0] + means[1]),
         "max": max(maxima),
         "overlap": float(shorter_inside.mean()),
     }
+
+
+def farthest_shared_point(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[int, float, float] | None:
+    """Where `polyline_agreement`'s max lies: which polyline holds the farthest counting sample (0:
+    `a`, 1: `b`), how far along that polyline it lies from its nearer end, and its distance to the
+    other, both in units of `radius`; None where no sample counts. A max at a rod's end is a hook
+    or a run onto what the part meets; one in the middle is the rod on something else there."""
+    best: tuple[int, float, float] | None = None
+    for which, (dist, inside, along) in enumerate(_shared_distances(a, b, radius)):
+        if inside.any():
+            k = int(np.flatnonzero(inside)[np.argmax(dist[inside])])
+            if best is None or dist[k] / radius > best[2]:
+                best = (which, float(min(along[k], along[-1] - along[k])) / radius, float(dist[k]) / radius)
+    return best
+
+
+def _shared_distances(a: np.ndarray, b: np.ndarray, radius: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """For `a` against `b` and `b` against `a`: each polyline's dense samples' distances to the
+    other, whether each projects inside it, and the samples' arc lengths (`polyline_agreement`)."""
+    a = _as_polyline(a, 3, "a")
+    b = _as_polyline(b, 3, "b")
+    if not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius: must be finite and > 0, got {radius}")
+    out = []
+    for poly, other in ((a, b), (b, a)):
+        length = arc_lengths(poly)[-1]
+        count = int(np.clip(np.ceil(length / (SAMPLE_SPACING * radius)) + 1, MIN_SAMPLES, MAX_SAMPLES))
+        distance, inside = _directed(_resample(poly, count), other)
+        out.append((distance, inside, np.linspace(0.0, length, count)))
+    return out
 
 
 def _end_tangent(stroke: np.ndarray, arc: np.ndarray, at_start: bool, span: float) -> np.ndarray:

@@ -74,9 +74,13 @@ class ViewResult:
     given: Extraction | None
     estimated: Extraction | None
     reversed: Extraction | None
-    jittered: list[Extraction] = field(default_factory=list)
-    jitter_failures: int = 0
+    jittered: list[Extraction] = field(default_factory=list)  # of the jittered strokes that did not fail
+    failed_strokes: list[int] = field(default_factory=list)  # the numbers of those that failed, from 0
     errors: list[str] = field(default_factory=list)
+
+    @property
+    def jitter_failures(self) -> int:
+        return len(self.failed_strokes)
 
 
 @dataclass
@@ -172,11 +176,13 @@ def run_case(scene: GaussianScene, case: dict[str, Any], jitter: int = 10, draw:
         result = ViewResult(
             view["name"], attempt(stroke, radius), attempt(stroke, None), attempt(cs.reversed_stroke(stroke), radius)
         )
-        for s in cs.jittered_strokes(stroke, count=jitter, seed=jitter_seed(case["name"], view["name"], draw)):
+        for number, s in enumerate(
+            cs.jittered_strokes(stroke, count=jitter, seed=jitter_seed(case["name"], view["name"], draw))
+        ):
             try:
                 result.jittered.append(extract_rod(scene, camera, s, radius=radius, render=images))
             except PathNotFoundError:
-                result.jitter_failures += 1
+                result.failed_strokes.append(number)
         result.errors = errors
         results.append(result)
     return results
