@@ -172,6 +172,22 @@ def changed_pixels(page: Page, before: np.ndarray, by: int = 40) -> int:
     return int((np.abs(screenshot(page).astype(np.int32) - before).sum(axis=2) > by).sum())
 
 
+def still_screenshot(page: Page, timeout: float, what: str, quiet: float = 1.5) -> np.ndarray:
+    """A `screenshot` (as int32) once the canvas has not changed for `quiet` seconds."""
+    last, since = screenshot(page).astype(np.int32), time.monotonic()
+
+    def still() -> bool:
+        nonlocal last, since
+        now = screenshot(page).astype(np.int32)
+        if (np.abs(now - last).sum(axis=2) > 40).any():
+            since = time.monotonic()
+        last = now
+        return time.monotonic() - since >= quiet
+
+    wait_for(still, timeout, what, 0.2)
+    return last
+
+
 def client_camera(client, width: int) -> Camera:
     cam = client.camera
     return camera_from_viser(cam.wxyz, cam.position, cam.fov, cam.aspect, width)
@@ -386,16 +402,16 @@ def test_on_a_real_stem_the_balls_show_and_sketching_paints_nothing(session, tmp
             wait_for(lambda: (screenshot(page).min(axis=2) < 200).mean() > 0.2, 30, "the plant to be drawn", 0.5)
             page.keyboard.press("3")
             shows(page, "drag a ball on a rod")
-            time.sleep(1.0)  # let the balls appear
-            with_balls = screenshot(page).astype(np.int32)
+            # Hide the balls, then show them again and wait for them: when they first show is up to
+            # how soon the client draws what the server sent, which a loaded machine can delay
+            # past any fixed pause, while each press's change can be waited for.
             page.keyboard.press("h")
-            wait_for(lambda: changed_pixels(page, with_balls), 10, "the balls to hide")
-            time.sleep(0.5)
-            # where the balls were, the stem shows now: clearly other pixels (each channel by 50
-            # on average). Drawn at the axis, behind the stem's splats, they changed 128 pixels
+            without_balls = still_screenshot(page, 20, "the balls to hide")
+            page.keyboard.press("h")
+            # where the balls are, they show over the stem: clearly other pixels (each channel by
+            # 50 on average). Drawn at the axis, behind the stem's splats, they changed 128 pixels
             # so; in front of them, 877.
-            balls = changed_pixels(page, with_balls, by=150)
-            assert balls > 500, balls
+            wait_for(lambda: changed_pixels(page, without_balls, by=150) > 500, 20, "the balls to show over the stem")
             # in Sketch the pointer over the scene does not paint it: viser outlines a mesh that
             # takes clicks in yellow while the pointer is over it, and the surface catching the
             # strokes, around the camera, took them (a yellow wedge over the plant)
