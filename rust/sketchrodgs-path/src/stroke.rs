@@ -35,6 +35,12 @@ const MAX_CANDIDATES: usize = 4;
 /// A surface seen only behind another (a stem behind a leaf) scores this share of a visible one:
 /// where both make a chain as long, the visible one is taken.
 const HIDDEN_SCORE: f32 = 0.9;
+/// The visible chain gives way to its rival at another depth under the same stroke where the rival
+/// scores at least this share of it ... (`closer_rival`)
+const RIVAL_SHARE: f32 = 0.8;
+/// ... and its members lie this much nearer the stroke's samples on average (`Candidate::near`): the
+/// stroke follows it more closely.
+const RIVAL_NEARER: f32 = 0.05;
 /// The chain may run behind the front only where that scores this share more than the chain over
 /// the visible surfaces alone.
 const BEHIND_GAIN: f32 = 0.15;
@@ -185,6 +191,8 @@ impl CleanStroke {
 struct Candidate {
     depth: f32,
     score: f32,
+    /// How near the sample its pixel lies: 1 on it, 0.5 at the band's edge (a factor of `score`).
+    near: f32,
     pixel: usize,
     /// 0: visible at `pixel`; else seen only in that layer behind the front.
     layer: usize,
@@ -241,7 +249,8 @@ pub(crate) fn clean_stroke(
     // only where it scores clearly more (a stem behind leaves, not a detour at a node).
     let visible: Vec<Vec<Candidate>> =
         candidates.iter().map(|c| c.iter().copied().filter(|c| c.layer == 0).collect()).collect();
-    let (mut chain, front_score) = depth_chain(&visible, &arc, depth_gap, focal_px);
+    let (chain, front_score) = depth_chain(&visible, &arc, depth_gap, focal_px);
+    let (mut chain, front_score) = closer_rival(chain, front_score, &visible, &arc, depth_gap, focal_px);
     let mut behind = false;
     if image.has_behind() {
         let (all, score) = depth_chain(&candidates, &arc, depth_gap, focal_px);
@@ -301,6 +310,63 @@ pub(crate) fn clean_stroke(
         behind,
         wants_behind,
     })
+}
+
+/// The chain over `candidates`, `chain` scoring `score`, or its rival at another depth: the best
+/// chain over the surfaces more than `depth_gap` from `chain`'s depth along the stroke. Where the
+/// stroke runs between two parts at different depths (two fingers of a tree side by side, a jittered
+/// stroke over their seam), their totals nearly tie, and the part is the one the stroke follows more
+/// closely: the rival is taken where it scores at least `RIVAL_SHARE` of `score` and its members
+/// lie `RIVAL_NEARER` nearer the samples on average (docs/extraction.md, "Stroke clean-up", **A
+/// rival at another depth**).
+fn closer_rival(
+    chain: Vec<(usize, Candidate)>,
+    score: f32,
+    candidates: &[Vec<Candidate>],
+    arc: &[f32],
+    depth_gap: f32,
+    focal_px: f32,
+) -> (Vec<(usize, Candidate)>, f32) {
+    let (Some(first), Some(last)) = (chain.first(), chain.last()) else {
+        return (chain, score);
+    };
+    // the chain's depth at each sample: between members along the arc, its end's beyond its ends
+    let depth_at = |i: usize| {
+        let k = chain.partition_point(|m| m.0 <= i);
+        if k == 0 {
+            return first.1.depth;
+        }
+        if k == chain.len() {
+            return last.1.depth;
+        }
+        let ((a, before), (b, after)) = (chain[k - 1], chain[k]);
+        let t = if arc[b] > arc[a] { (arc[i] - arc[a]) / (arc[b] - arc[a]) } else { 0.0 };
+        before.depth + t * (after.depth - before.depth)
+    };
+    let elsewhere: Vec<Vec<Candidate>> = candidates
+        .iter()
+        .enumerate()
+        .map(|(i, c)| c.iter().copied().filter(|c| (c.depth - depth_at(i)).abs() > depth_gap).collect())
+        .collect();
+    let (rival, rival_score) = depth_chain(&elsewhere, arc, depth_gap, focal_px);
+    // per member, how near the samples and its score (which also counts how slender): a part on a
+    // surface measures as wide as it, and a strip of that surface beside it is nearer but not
+    // more slender; where the part hides behind a limb, the limb under the stroke is nearer but wide
+    let means = |members: &[(usize, Candidate)]| {
+        let count = members.len().max(1) as f32;
+        let sum = members.iter().fold((0.0, 0.0), |(near, scored), m| (near + m.1.near, scored + m.1.score));
+        (sum.0 / count, sum.1 / count)
+    };
+    let ((rival_near, rival_scored), (chain_near, chain_scored)) = (means(&rival), means(&chain));
+    if rival.len() >= 2
+        && rival_score >= RIVAL_SHARE * score
+        && rival_near > chain_near + RIVAL_NEARER
+        && rival_scored > chain_scored + RIVAL_NEARER
+    {
+        (rival, rival_score)
+    } else {
+        (chain, score)
+    }
 }
 
 /// Whether the chain behind, `behind` (cut to its visible ends), scores `BEHIND_GAIN` more than the
@@ -836,6 +902,7 @@ fn surfaces_near(
             Candidate {
                 depth: s.depth,
                 score: hidden * near * (1.0 - WIDE_SCORE * wide / WIDE_CAP),
+                near,
                 pixel: s.pixel,
                 layer: s.layer,
                 wide,
@@ -1068,6 +1135,44 @@ mod tests {
     }
 
     #[test]
+    fn a_rival_the_stroke_follows_more_closely_is_taken_at_a_near_tie_only() {
+        // 40 samples 3 px apart: one surface under all of them at the band's edge (depth 1), another
+        // under the last `near` of them, close to the samples (depth 2), `wide` radii too wide; no
+        // chain steps between them
+        let arc: Vec<f32> = (0..40).map(|i| 3.0 * i as f32).collect();
+        let depth_taken = |count: usize, edge: f32, wide: f32| {
+            let surface = |i: usize, depth: f32, near: f32, wide: f32| {
+                let score = near * (1.0 - WIDE_SCORE * wide / WIDE_CAP);
+                Candidate { depth, score, near, pixel: i, layer: 0, wide }
+            };
+            let candidates: Vec<Vec<Candidate>> = (0..40)
+                .map(|i| {
+                    let mut here = vec![surface(i, 1.0, edge, 0.0)];
+                    if i >= 40 - count {
+                        here.push(surface(i, 2.0, 0.99, wide));
+                    }
+                    here
+                })
+                .collect();
+            let (chain, score) = depth_chain(&candidates, &arc, 0.03, 500.0);
+            assert!(chain.iter().all(|m| m.1.depth == 1.0), "the best chain is the longer one");
+            let (chain, _) = closer_rival(chain, score, &candidates, &arc, 0.03, 500.0);
+            chain[0].1.depth
+        };
+        // 22 close samples (21.8) against 40 at the edge (24): the stroke follows the near one
+        assert_eq!(depth_taken(22, 0.6, 0.0), 2.0);
+        // 15 (14.9): not a tie
+        assert_eq!(depth_taken(15, 0.6, 0.0), 1.0);
+        // 36 close samples against 40 nearly as close (0.95): not nearer by 0.05
+        assert_eq!(depth_taken(36, 0.95, 0.0), 1.0);
+        // a rival nearer the samples but wider: 30 samples 1.6 radii too wide (0.79 each, 23.8)
+        // against 40 slender ones at 0.7 (28) still scores 0.05 more each, and is taken; 36 samples
+        // 2 radii too wide (0.74 each, 26.7) do not (a leaf under the stroke, the part beside it)
+        assert_eq!(depth_taken(30, 0.7, 1.6), 2.0);
+        assert_eq!(depth_taken(36, 0.7, 2.0), 1.0);
+    }
+
+    #[test]
     fn the_ranked_search_finds_the_chain_all_pairs_find() {
         // surfaces at a few depths, on and off in runs, with scores in quarter steps (ties happen)
         let mut next = numbers_below(12345_u64);
@@ -1080,6 +1185,7 @@ mod tests {
                         .map(|k| Candidate {
                             depth: 1.0 + 0.05 * next(6) as f32 + 0.001 * i as f32,
                             score: 0.25 * (1 + next(4)) as f32,
+                            near: 1.0,
                             pixel: i * 4 + k as usize,
                             layer: 0,
                             wide: 0.0,
@@ -1100,7 +1206,8 @@ mod tests {
         // 30 samples 3 px apart on the part at depth 1 (depth gap 0.03); the last or first `count`
         // members are replaced by a run at `depth`, stepping to it at once or sloping to it
         let arc: Vec<f32> = (0..30).map(|i| 3.0 * i as f32).collect();
-        let member = |i: usize, depth: f32, wide: f32| (i, Candidate { depth, score: 1.0, pixel: i, layer: 0, wide });
+        let member =
+            |i: usize, depth: f32, wide: f32| (i, Candidate { depth, score: 1.0, near: 1.0, pixel: i, layer: 0, wide });
         let cut = |at_end: bool, count: usize, depth: f32, wide: f32, sloping: bool| {
             let mut chain: Vec<_> = (0..30).map(|i| member(i, 1.0, 0.0)).collect();
             for j in 0..count {
@@ -1131,7 +1238,9 @@ mod tests {
         // `count` members step to `depth` at once.
         let arc: Vec<f32> = (0..60).map(|i| 3.0 * i as f32).collect();
         let part = || -> Vec<_> {
-            (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect()
+            (0..60)
+                .map(|i| (i, Candidate { depth: 1.0, score: 1.0, near: 1.0, pixel: i, layer: 0, wide: 0.0 }))
+                .collect()
         };
         let cut = |at_end: bool, count: usize, depth: f32, focal_px: f32| {
             let mut chain = part();
@@ -1172,7 +1281,19 @@ mod tests {
         let receding = |a: f32| 1.0 - 0.0012 * a;
         let cut = |count: usize, depth: &dyn Fn(f32) -> f32| {
             let mut chain: Vec<_> = (0..60)
-                .map(|i| (i, Candidate { depth: receding(arc[i.min(39)]), score: 1.0, pixel: i, layer: 0, wide: 0.0 }))
+                .map(|i| {
+                    (
+                        i,
+                        Candidate {
+                            depth: receding(arc[i.min(39)]),
+                            score: 1.0,
+                            near: 1.0,
+                            pixel: i,
+                            layer: 0,
+                            wide: 0.0,
+                        },
+                    )
+                })
                 .collect();
             for m in &mut chain[60 - count..] {
                 m.1.depth = depth(arc[m.0]);
@@ -1198,8 +1319,9 @@ mod tests {
         // sprinkle), and the run after them 1.2 gaps in front of the bump, 0.01 nearer than the part.
         let arc: Vec<f32> = (0..60).map(|i| 3.0 * i as f32).collect();
         let cut = |bump: usize, count: usize| {
-            let mut chain: Vec<_> =
-                (0..60).map(|i| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 })).collect();
+            let mut chain: Vec<_> = (0..60)
+                .map(|i| (i, Candidate { depth: 1.0, score: 1.0, near: 1.0, pixel: i, layer: 0, wide: 0.0 }))
+                .collect();
             for m in &mut chain[60 - count - bump..60 - count] {
                 m.1.depth = 1.036;
             }
@@ -1222,17 +1344,17 @@ mod tests {
         // behind on the stem hidden under it (0.9 x 0.87): 0.78 against 0.5 there, 1.56 x, while
         // over all (40 of 100 samples) 91.2 against 80, 1.14 x, under the 15 % of `BEHIND_GAIN`.
         let arc: Vec<f32> = (0..100).map(|i| 3.0 * i as f32).collect();
-        let stem = |i: usize| (i, Candidate { depth: 1.0, score: 1.0, pixel: i, layer: 0, wide: 0.0 });
+        let stem = |i: usize| (i, Candidate { depth: 1.0, score: 1.0, near: 1.0, pixel: i, layer: 0, wide: 0.0 });
         let gains = |stretch: std::ops::Range<usize>, wide: f32| {
             let visible: Vec<_> = (0..100)
                 .map(|i| match stretch.contains(&i) {
-                    true => (i, Candidate { depth: 0.9, score: 0.5, pixel: i, layer: 0, wide }),
+                    true => (i, Candidate { depth: 0.9, score: 0.5, near: 1.0, pixel: i, layer: 0, wide }),
                     false => stem(i),
                 })
                 .collect();
             let behind: Vec<_> = (0..100)
                 .map(|i| match stretch.contains(&i) {
-                    true => (i, Candidate { depth: 1.0, score: 0.78, pixel: i, layer: 1, wide: 0.0 }),
+                    true => (i, Candidate { depth: 1.0, score: 0.78, near: 1.0, pixel: i, layer: 1, wide: 0.0 }),
                     false => stem(i),
                 })
                 .collect();
@@ -1253,7 +1375,9 @@ mod tests {
         let cut = |count: usize, profile: &dyn Fn(f32) -> f32, wide: &dyn Fn(usize) -> f32, at_end: bool| {
             let arc: Vec<f32> = (0..count).map(|i| 3.0 * i as f32).collect();
             let mut chain: Vec<_> = (0..count)
-                .map(|i| (i, Candidate { depth: profile(arc[i]), score: 1.0, pixel: i, layer: 0, wide: wide(i) }))
+                .map(|i| {
+                    (i, Candidate { depth: profile(arc[i]), score: 1.0, near: 1.0, pixel: i, layer: 0, wide: wide(i) })
+                })
                 .collect();
             if !at_end {
                 // the same chain drawn from the other end
