@@ -57,9 +57,8 @@ def jitter_misses(case: dict, views: list[realcases.ViewResult], draw: int) -> l
     """Per jittered stroke of one draw whose rod lies over the jitter max from the rod as drawn, or
     that failed (the mean target is the cases' mean over all strokes, so no one stroke misses it):
     the case, view, draw, the stroke's number in `jittered_strokes`' list, its mean and max, and
-    where the max lies
-    (`consistency.farthest_shared_point`): at a rod's end, a hook or a run onto what the part meets,
-    or inside it, the rod on something else there."""
+    where the max lies (`consistency.farthest_shared_point`): at a rod's end, a hook or a run onto
+    what the part meets, or inside it, the rod on something else there."""
     t, radius, rows = realcases.TARGETS, float(case["radius"]), []
     for view in views:
         if view.given is None:

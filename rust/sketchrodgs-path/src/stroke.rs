@@ -38,8 +38,8 @@ const HIDDEN_SCORE: f32 = 0.9;
 /// The visible chain gives way to its rival at another depth under the same stroke where the rival
 /// scores at least this share of it ... (`closer_rival`)
 const RIVAL_SHARE: f32 = 0.8;
-/// ... and its members lie this much nearer the stroke's samples on average (`Candidate::near`): the
-/// stroke follows it more closely.
+/// ... and its members lie this much nearer the stroke's samples on average (`Candidate::near`), and
+/// score this much more (the score also counts how slender): the stroke follows it more closely.
 const RIVAL_NEARER: f32 = 0.05;
 /// The chain may run behind the front only where that scores this share more than the chain over
 /// the visible surfaces alone.
@@ -317,8 +317,8 @@ pub(crate) fn clean_stroke(
 /// stroke runs between two parts at different depths (two fingers of a tree side by side, a jittered
 /// stroke over their seam), their totals nearly tie, and the part is the one the stroke follows more
 /// closely: the rival is taken where it scores at least `RIVAL_SHARE` of `score` and its members
-/// lie `RIVAL_NEARER` nearer the samples on average (docs/extraction.md, "Stroke clean-up", **A
-/// rival at another depth**).
+/// lie `RIVAL_NEARER` nearer the samples and score `RIVAL_NEARER` more, on average
+/// (docs/extraction.md, "Stroke clean-up", **A rival at another depth**).
 fn closer_rival(
     chain: Vec<(usize, Candidate)>,
     score: f32,
