@@ -287,16 +287,8 @@ pub(crate) fn clean_stroke(
     }
     // trim to the chain's first and last samples; interpolate the depth between chain samples
     let (first, last) = (chain[0].0, chain[chain.len() - 1].0);
-    let mut depth = vec![0.0; last - first + 1];
+    let depth = depth_along(&chain, &arc)[first..=last].to_vec();
     let mut anchor = vec![None; last - first + 1];
-    for pair in chain.windows(2) {
-        let ((i, a), (j, b)) = (pair[0], pair[1]);
-        let (zi, zj) = (a.depth, b.depth);
-        for k in i..=j {
-            let t = if arc[j] > arc[i] { (arc[k] - arc[i]) / (arc[j] - arc[i]) } else { 0.0 };
-            depth[k - first] = zi + t * (zj - zi);
-        }
-    }
     for &(i, surface) in &chain {
         anchor[i - first] = Some(surface.pixel);
     }
@@ -327,26 +319,13 @@ fn closer_rival(
     depth_gap: f32,
     focal_px: f32,
 ) -> (Vec<(usize, Candidate)>, f32) {
-    let (Some(first), Some(last)) = (chain.first(), chain.last()) else {
+    if chain.is_empty() {
         return (chain, score);
-    };
-    // the chain's depth at each sample: between members along the arc, its end's beyond its ends
-    let depth_at = |i: usize| {
-        let k = chain.partition_point(|m| m.0 <= i);
-        if k == 0 {
-            return first.1.depth;
-        }
-        if k == chain.len() {
-            return last.1.depth;
-        }
-        let ((a, before), (b, after)) = (chain[k - 1], chain[k]);
-        let t = if arc[b] > arc[a] { (arc[i] - arc[a]) / (arc[b] - arc[a]) } else { 0.0 };
-        before.depth + t * (after.depth - before.depth)
-    };
+    }
     let elsewhere: Vec<Vec<Candidate>> = candidates
         .iter()
-        .enumerate()
-        .map(|(i, c)| c.iter().copied().filter(|c| (c.depth - depth_at(i)).abs() > depth_gap).collect())
+        .zip(depth_along(&chain, arc))
+        .map(|(c, z)| c.iter().copied().filter(|c| (c.depth - z).abs() > depth_gap).collect())
         .collect();
     let (rival, rival_score) = depth_chain(&elsewhere, arc, depth_gap, focal_px);
     // per member, how near the samples and its score (which also counts how slender): a part on a
@@ -367,6 +346,24 @@ fn closer_rival(
     } else {
         (chain, score)
     }
+}
+
+/// The depth of `chain` at every sample of the stroke (`arc` its samples' arc lengths): between two
+/// members, along the arc from one to the other; before the first and after the last, theirs.
+fn depth_along(chain: &[(usize, Candidate)], arc: &[f32]) -> Vec<f32> {
+    let (Some(first), Some(last)) = (chain.first(), chain.last()) else {
+        return vec![0.0; arc.len()];
+    };
+    let mut depth = vec![first.1.depth; arc.len()];
+    depth[last.0..].fill(last.1.depth);
+    for pair in chain.windows(2) {
+        let ((i, a), (j, b)) = (pair[0], pair[1]);
+        for k in i..=j {
+            let t = if arc[j] > arc[i] { (arc[k] - arc[i]) / (arc[j] - arc[i]) } else { 0.0 };
+            depth[k] = a.depth + t * (b.depth - a.depth);
+        }
+    }
+    depth
 }
 
 /// Whether the chain behind, `behind` (cut to its visible ends), scores `BEHIND_GAIN` more than the
