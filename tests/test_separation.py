@@ -1,6 +1,7 @@
 """Separation (docs/deformation.md, "Separation"): the part's shell is trimmed by the cut that
-splits the fewest close pairs between what moves and what stays, so a part leaves behind the
-piece of a crossing bar it touches, keeps its own skin, a tie keeps a Gaussian with the part, and
+splits the fewest close pairs between what moves and what stays, a shell Gaussian left behind
+counting a fifth of a pair, so a part leaves behind the piece of a crossing bar it touches, keeps
+its own skin and a face joined to it by few pairs, a tie keeps a Gaussian with the part, and
 nothing is cut where the rod does not move."""
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from scipy.spatial import cKDTree
 from sketchrodgs import synthetic
 from sketchrodgs.scene import GaussianScene
 from sketchrodgs.segment import Binding, segment_and_bind
-from sketchrodgs.separation import PAIR_RADII, trim_shell
+from sketchrodgs.separation import PAIR_RADII, STRAND_SHARE, trim_shell
 
 R = 0.01
 AXIS = np.stack([np.linspace(-0.45, 0.45, 91), np.full(91, 0.05), np.zeros(91)], axis=1)
@@ -93,7 +94,42 @@ def test_a_crossing_bar_of_another_colour_is_left_out_before_any_cut():
     assert np.isin(tube, binding.gaussian_ids).mean() > 0.99
 
 
-def test_the_cut_splits_the_fewest_pairs_and_keeps_all_it_can():
+def test_a_face_joined_to_the_part_by_few_pairs_goes_with_it_though_it_touches_what_stays():
+    """A flat bar's far face, joined to the near one by a thin bridge and lying against a wall (the
+    guitar stand's leg against the body): cutting at the bridge splits fewer pairs than at the wall,
+    but leaves the whole face behind, a ghost of the part."""
+    grid = np.arange(-4 * R, 4 * R + 1e-9, 0.2 * R)
+    across = np.arange(-0.4 * R, 0.4 * R + 1e-9, 0.2 * R)
+    core = np.array([(x, 0.8 * R, z) for x in grid for z in across])
+    bridge = np.array([(0.0, 1.0 * R, 0.0), (0.0, 1.2 * R, 0.0)])
+    face = np.array([(x, y, z) for x in grid for y in (1.4 * R, 1.6 * R) for z in across])
+    wall = np.array([(x, 1.8 * R, z) for x in np.arange(-0.4 * R, 0.4 * R + 1e-9, 0.2 * R) for z in across])
+    means = np.concatenate([core, bridge, face, wall]).astype(np.float32)
+    bound = np.arange(len(core) + len(bridge) + len(face))
+    offset = means[bound] * np.array([0, 1, 1], np.float32)  # the axis is the x axis
+    binding = Binding(
+        bound,
+        np.zeros(len(bound), np.int32),
+        np.zeros(len(bound), np.float32),
+        offset,
+        np.linalg.norm(offset, axis=1).astype(np.float32),
+        np.zeros(len(bound), bool),
+    )
+    face_rows = np.arange(len(core) + len(bridge), len(bound))
+    without_face = np.arange(len(core) + len(bridge))
+    # the bridge is the fewest pairs: cut there, the whole face would stay
+    assert split_pairs(means, without_face, R) < split_pairs(means, bound, R)
+    trimmed = trim_shell(means, binding, R)
+    assert np.isin(face_rows, trimmed.gaussian_ids).all()
+
+
+def split_cost(means: np.ndarray, moving_rows: np.ndarray, shell_rows: np.ndarray, radius: float) -> int:
+    """What the cut weighs, in fifths of a pair: split pairs, and shell Gaussians left behind."""
+    left = len(np.setdiff1d(shell_rows, moving_rows))
+    return STRAND_SHARE * split_pairs(means, moving_rows, radius) + left
+
+
+def test_the_cut_costs_the_least_and_keeps_all_it_can():
     """Against every choice of which shell Gaussians move, on small random clouds."""
     rng = np.random.default_rng(4)
     for _ in range(6):
@@ -113,11 +149,12 @@ def test_the_cut_splits_the_fewest_pairs_and_keeps_all_it_can():
             np.zeros(16, bool),
         )
         trimmed = trim_shell(means, binding, R)
-        got = split_pairs(means, trimmed.gaussian_ids, R)
+        shell_rows = np.arange(6, 16)
+        got = split_cost(means, trimmed.gaussian_ids, shell_rows, R)
         choices = []
         for mask in itertools.product([False, True], repeat=10):
             moving = np.concatenate([np.arange(6), 6 + np.flatnonzero(mask)])
-            choices.append((split_pairs(means, moving, R), set(moving.tolist())))
+            choices.append((split_cost(means, moving, shell_rows, R), set(moving.tolist())))
         best = min(count for count, _ in choices)
         assert got == best
         # of the choices that split the fewest, the kept set holds every one's moving Gaussians

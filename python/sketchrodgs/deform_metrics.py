@@ -1,5 +1,6 @@
 """How cleanly a deformed scene follows its rods (issue: pulled real objects deform cleanly):
-needles that stick out of a bend, and neighbours that tear apart, both comparing a scene at rest
+needles that stick out of a bend, neighbours that tear apart, and pieces left behind where the
+part was, each comparing a scene at rest
 with the same scene deformed, row for row, in units of the rod's radius R; and a ground truth,
 a synthetic tube bent into an arc by the exact continuum map, rendered against our skinning.
 
@@ -24,6 +25,9 @@ MOVED = 0.05  # a Gaussian "moved" when its centre moved more than this many R
 NEEDLE = 0.5  # a tip sticking out by more than this many R is a needle
 TEAR_PAIR = 0.25  # neighbours at rest: centres within this many R
 TEAR = 0.5  # a pair tears when their displacements differ by more than this many R
+LEFT_NEAR = 2.0  # left behind: within this many R of the rest axis,
+LEFT_AXIS_MOVED = 2.0  # where the axis moved more than this many R,
+LEFT_SHARE = 0.25  # moving less than this share of the axis's motion there
 
 
 def _moved(rest: GaussianScene, deformed: GaussianScene, radius: float) -> np.ndarray:
@@ -112,6 +116,36 @@ def tear_fraction(rest: GaussianScene, deformed: GaussianScene, radius: float) -
         return 0.0
     torn = np.linalg.norm(displacement[first] - displacement[second], axis=1) > TEAR * radius
     return float(torn.mean())
+
+
+def left_behind_fraction(
+    rest: GaussianScene, deformed: GaussianScene, rest_axis: np.ndarray, deformed_axis: np.ndarray, radius: float
+) -> float:
+    """Among the Gaussians within 2 R of the rest axis where the axis moved more than 2 R, the
+    opacity-weighted fraction that moved less than a quarter as far as the axis there: what stays
+    where the part was, a ghost of it (a tear inside the part's reach, which the tear fraction does
+    not see where the piece left is joined to the part by few close pairs).
+
+    `rest_axis` and `deformed_axis` are one rod's polyline at rest and now, vertex for vertex."""
+    rest_axis, deformed_axis = np.asarray(rest_axis, np.float64), np.asarray(deformed_axis, np.float64)
+    # both axes resampled alike, 16 points per segment, so that a point's motion is the axis's there
+    t = np.linspace(0.0, len(rest_axis) - 1.0, 16 * (len(rest_axis) - 1) + 1)
+    segment = np.minimum(t.astype(np.int64), len(rest_axis) - 2)
+    along = (t - segment)[:, None]
+    dense_rest = rest_axis[segment] * (1 - along) + rest_axis[segment + 1] * along
+    dense_now = deformed_axis[segment] * (1 - along) + deformed_axis[segment + 1] * along
+    means = rest.means.astype(np.float64)
+    distance, nearest = cKDTree(dense_rest).query(means, distance_upper_bound=LEFT_NEAR * radius)
+    near = np.flatnonzero(np.isfinite(distance))
+    axis_motion = np.linalg.norm(dense_now[nearest[near]] - dense_rest[nearest[near]], axis=1)
+    moved = axis_motion > LEFT_AXIS_MOVED * radius
+    near, axis_motion = near[moved], axis_motion[moved]
+    if len(near) == 0:
+        return 0.0
+    motion = np.linalg.norm(deformed.means[near].astype(np.float64) - means[near], axis=1)
+    weight = rest.opacities[near].astype(np.float64)
+    left = motion < LEFT_SHARE * axis_motion
+    return float(weight[left].sum() / max(weight.sum(), 1e-300))
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:

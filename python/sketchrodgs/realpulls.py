@@ -1,8 +1,8 @@
 """Pulls of real captured parts (issue: pulled real objects deform cleanly): a part of the
 real-capture case set (tests/data/real_cases) extracted in one of its views, both ends clamped,
 its middle vertex pulled across the view by 0.35 of the rod's length and held; scored at the end
-of the hold by the needle fraction (over the rod's own Gaussians, attached parts left out) and the
-tear fraction (over all) of `deform_metrics`.
+of the hold by the needle fraction (over the rod's own Gaussians, attached parts left out), the
+tear fraction (over all) and the fraction left behind where the part was, of `deform_metrics`.
 
 Used by `tests/test_deform.py`, `benches/bench_skin.py` and `benches/pull_gallery.py`.
 """
@@ -41,6 +41,7 @@ class PullResult:
     radius: float
     needles: float
     tears: float
+    left_behind: float
     skin_seconds: float  # per frame, mean
 
 
@@ -95,5 +96,6 @@ def pull_case(
             rows=np.setdiff1d(np.arange(len(rest)), bound.gaussian_ids[bound.attached]),
         ),
         deform_metrics.tear_fraction(rest, deformed, radius),
+        deform_metrics.left_behind_fraction(rest, deformed, extraction.polyline, axis_now, radius),
         float(np.mean(skin_times)),
     )

@@ -10,8 +10,9 @@ So the shell is trimmed by a minimum cut. On one side everything the rod carries
 core within R of the axis and the attached parts, continuations and strays. On the other the
 Gaussians that stay. Each shell Gaussian goes to the side that splits the fewest pairs closer than
 `PAIR_RADII * R` (the pairs the tear fraction counts), each pair counted by the share of the rod's
-motion it takes (eased to 0 at a clamped end: a pair split where nothing moves does not tear);
-where the count ties it stays with the part.
+motion it takes (eased to 0 at a clamped end: a pair split where nothing moves does not tear),
+and a shell Gaussian left behind counts `1 / STRAND_SHARE` of a pair: it is a ghost of the part
+where the part was. Where the count ties it stays with the part.
 On the real pulls (`benches/bench_skin.py`) the tree branch's tears went from 0.48 % to 0.25 %, the
 plant side stem's from 0.40 % to 0.28 %, and the plant main stem's from 0.88 % to 0.13 %.
 """
@@ -30,6 +31,10 @@ PAIR_RADII = 0.25  # pairs closer than this many R are what a tear splits (defor
 CORE_RADII = 1.0  # within this many R of the axis a Gaussian is the part's core and always moves
 
 MOTION_STEPS = 16  # a pair's capacity: its share of the motion in sixteenths
+# A shell Gaussian left behind costs a fifth of a split pair. Counting pairs alone, the cut left the
+# far face of the guitar stand's legs (269 Gaussians joined to the leg by 3 pairs, touching the body
+# by 18) where the legs had been, dark streaks over the body (docs/deformation.md, "Separation").
+STRAND_SHARE = 5
 
 SOURCE, SINK = 0, 1  # the graph's two terminal nodes; shell Gaussian k is node 2 + k
 
@@ -61,14 +66,16 @@ def trim_shell(means: np.ndarray, binding: Binding, radius: float, motion: np.nd
     k, other = touching["i"], others[touching["j"]]
     count = len(shell_rows)
     share = np.ones(count) if motion is None else np.asarray(motion, np.float64)[shell]
-    cost = np.rint(MOTION_STEPS * share).astype(np.int64)
-    # per shell Gaussian, its pairs with what surely moves and with what stays: one edge to each terminal
-    to_source = np.bincount(k[moves[other]], minlength=count) * cost
-    to_sink = np.bincount(k[~moves[other]], minlength=count) * cost
+    cost = np.rint(MOTION_STEPS * share).astype(np.int64)  # a strand's; a pair's is STRAND_SHARE times it
+    # per shell Gaussian, its pairs with what surely moves and with what stays: one edge to each
+    # terminal; the edge to what moves also holds what leaving the Gaussian behind costs
+    to_source = (np.bincount(k[moves[other]], minlength=count) * STRAND_SHARE + 1) * cost
+    to_sink = np.bincount(k[~moves[other]], minlength=count) * STRAND_SHARE * cost
     nodes = 2 + np.arange(count)
     heads = np.concatenate([between[:, 0] + 2, np.full(count, SOURCE), nodes])
     tails = np.concatenate([between[:, 1] + 2, nodes, np.full(count, SINK)])
-    pair_cost = np.rint(MOTION_STEPS * (share[between[:, 0]] + share[between[:, 1]]) / 2).astype(np.int64)
+    pair_share = (share[between[:, 0]] + share[between[:, 1]]) / 2
+    pair_cost = STRAND_SHARE * np.rint(MOTION_STEPS * pair_share).astype(np.int64)
     weights = np.concatenate([pair_cost, to_source, to_sink])
     used = weights > 0
     heads, tails, weights = heads[used], tails[used], weights[used]
