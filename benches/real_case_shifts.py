@@ -6,7 +6,7 @@ a rod that comes out shorter (the distances count only where the rods overlap). 
 a minute (docs/real_captures.md, "A pixel's shift").
 
     python benches/real_case_shifts.py [--only SUBSTRING] [--all] [--save F] [--against F]
-        [--sideways K | --overshoot PX | --zoom F | --diameters K]
+        [--sideways K | --overshoot PX | --zoom F | --diameters K | --part SHARE]
 
 Per set: the views whose shifted rods lie over 1.5 R from the rod as drawn, come out under 0.75 of
 its length, or whose R estimates spread over 1.3 x; `--all` lists every view. `--save F` writes
@@ -19,7 +19,10 @@ then its last, PX pixels further along its end's direction: a stroke drawn on pa
 part at F times and 1/F times its pixels, at the same image size (docs/extraction.md, "Resolution");
 a stroke zoomed in past the image's edge is left out. `--diameters K` draws a stroke K diameters
 long along the rod as drawn, where it is seen, nearest its middle (`realcases.short_stroke`): the
-issue's short stroke (docs/extraction.md, "Radius").
+issue's short stroke (docs/extraction.md, "Radius"). `--part SHARE` draws the first, middle and
+last SHARE of the stroke's stretch over the rod as drawn (`realcases.part_strokes`): a stroke over
+part of the part (docs/real_captures.md, "Part of a part"); its rods' lengths count against SHARE of
+the rod as drawn.
 """
 
 from __future__ import annotations
@@ -52,12 +55,13 @@ SHORT = 0.75  # and one shorter than this share of it
 SPREAD = 1.3  # and R estimates spreading over this ratio
 
 
-def shifted(scene, camera, stroke, moved, radius, images, true_radius) -> dict[str, float]:
+def shifted(scene, camera, stroke, moved, radius, images, true_radius, share=1.0) -> dict[str, float]:
     """The rod of `stroke` (R `radius`, None to estimate it) against the rods of the `moved` strokes,
     each (camera, stroke, render or None): the largest distance (in `true_radius`), the least length
-    ratio, the estimates' range (x `true_radius`) and how many moved strokes failed."""
+    ratio (to `share` of the rod as drawn), the estimates' range (x `true_radius`) and how many moved
+    strokes failed."""
     drawn = extract_rod(scene, camera, stroke, radius=radius, render=images)
-    length = polyline_length(drawn.polyline)
+    length = share * polyline_length(drawn.polyline)
     far, short, radii, failed = 0.0, 1.0, [drawn.radius], 0
     for other_camera, other, other_images in moved:
         try:
@@ -86,6 +90,7 @@ class Job(NamedTuple):
     overshoot: float  # px each end is carried on
     zoom: float  # factor zoomed in and out
     diameters: float  # the stroke's length
+    part: float  # the share of the stretch over the rod drawn
 
 
 def score(job: Job) -> list[dict]:
@@ -98,11 +103,13 @@ def score(job: Job) -> list[dict]:
         camera = Camera.from_dict(view["camera"], f"{case['name']}/{view['name']}")
         stroke = np.asarray(view["stroke"], np.float64)
         images = render(scene, camera, outputs=realcases.SOLID_OUTPUTS)
-        if job.sideways or job.diameters:
+        if job.sideways or job.diameters or job.part:
             rod = extract_rod(scene, camera, stroke, radius=radius, render=images).polyline
         if job.diameters:
             short = realcases.short_stroke(camera, rod, radius, job.diameters, images)
             moved = [] if short is None else [(camera, short, images)]
+        elif job.part:
+            moved = [(camera, s, images) for s in realcases.part_strokes(stroke, camera, rod, job.part)]
         elif job.sideways:
             moved = [(camera, s, images) for s in realcases.sideways(stroke, camera, rod, radius, job.sideways)]
         elif job.overshoot:
@@ -113,8 +120,9 @@ def score(job: Job) -> list[dict]:
             moved = [(c, s, None) for c, s in zoomed if (s >= 0).all() and (s < [c.width, c.height]).all()]
         else:
             moved = [(camera, stroke + offset, images) for offset in SHIFTS]
-        given = shifted(scene, camera, stroke, moved, radius, images, radius)
-        estimated = shifted(scene, camera, stroke, moved, None, images, radius)
+        share = job.part or 1.0
+        given = shifted(scene, camera, stroke, moved, radius, images, radius, share)
+        estimated = shifted(scene, camera, stroke, moved, None, images, radius, share)
         rows.append({"view": f"{case['name']}/{view['name']}", "given": given, "estimated": estimated})
     return rows
 
@@ -140,15 +148,19 @@ def main() -> None:
     parser.add_argument("--overshoot", type=float, default=0.0, help="carry each stroke's ends this many px on")
     parser.add_argument("--zoom", type=float, default=0.0, help="zoom each view in and out by this factor (> 1)")
     parser.add_argument("--diameters", type=float, default=0.0, help="a stroke this many diameters long instead")
+    parser.add_argument("--part", type=float, default=0.0, help="strokes over this share of the rod drawn (0-1)")
     args = parser.parse_args()
     measures = [
         (args.sideways, f"moved {args.sideways:g} R to either side"),
         (args.overshoot, f"with an end carried {args.overshoot:g} px on"),
         (args.zoom, f"zoomed {args.zoom:g} x in and out"),
         (args.diameters, f"drawn {args.diameters:g} diameters long"),
+        (args.part, f"drawn over its first, middle and last {args.part:g}"),
     ]
     if sum(value != 0 for value, _ in measures) > 1:
-        parser.error("--sideways, --overshoot, --zoom and --diameters measure one at a time")
+        parser.error("--sideways, --overshoot, --zoom, --diameters and --part measure one at a time")
+    if args.part and not 0 < args.part < 1:
+        parser.error(f"--part: a share between 0 and 1, got {args.part:g}")
     if args.zoom and not args.zoom > 1:
         parser.error(f"--zoom: a factor over 1, got {args.zoom:g}")
     how = next((text for value, text in measures if value), "shifted by a pixel")
@@ -158,7 +170,7 @@ def main() -> None:
             start = time.perf_counter()
             _, cases = realcases.load_cases(DATA / file)
             jobs = [
-                Job(file, k, args.sideways, args.overshoot, args.zoom, args.diameters)
+                Job(file, k, args.sideways, args.overshoot, args.zoom, args.diameters, args.part)
                 for k, case in enumerate(cases)
                 if args.only in case["name"]
             ]

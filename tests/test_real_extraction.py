@@ -31,6 +31,7 @@ from sketchrodgs.realcases import (
     jitter_seed,
     load_cases,
     overshooting,
+    part_strokes,
     run_case,
     score_case,
     short_stroke,
@@ -425,6 +426,29 @@ def test_a_branch_in_front_of_the_trunk_estimates_its_radius_from_its_silhouette
     stroke = np.array([[548, 403], [535, 412], [520, 422], [505, 434], [492, 446]], np.float64)
     rod = extract_rod(scenes["tree"], camera, stroke)
     assert TARGETS["radius_low"] <= rod.radius / 0.015 <= TARGETS["radius_high"], rod.radius
+
+
+@pytest.mark.parametrize(
+    ("name", "view", "how"), [("tree_branch_centre", "az060", "middle half"), ("tree_finger_far_left", "az315", "edge")]
+)
+def test_a_branch_shaded_across_estimates_its_radius_from_its_width_not_its_light_side(name, view, how):
+    """A tree branch's baked shading darkens one side without changing its hue. The centre branch in
+    az060 stroked over the middle half of its stroke (`realcases.part_strokes`), and the far left
+    finger in az315 along its edge, 0.7 R aside, have walks ending on branches just behind, not on
+    the background: the colour rule took the lit side's width, 0.30 and 0.15 of the radius
+    (docs/extraction.md, "A part lying on a surface", Shading is not a surface)."""
+    group = "cases" if name == "tree_branch_centre" else "heldout"
+    scene, case, camera, stroke = _case_view(group, name, view)
+    drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
+    if how == "edge":
+        moved = sideways(stroke, camera, drawn.polyline, case["radius"], 0.7)
+    else:
+        moved = [part_strokes(stroke, camera, drawn.polyline, 0.5)[1]]
+    for other in moved:
+        rod = extract_rod(scene, camera, other)
+        assert TARGETS["radius_low"] <= rod.radius / case["radius"] <= TARGETS["radius_high"], (
+            rod.radius / case["radius"]
+        )
 
 
 def test_a_foot_receding_behind_a_leg_keeps_its_rod_past_the_leg():

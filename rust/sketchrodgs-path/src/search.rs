@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use crate::band::{Band, label_band};
 use crate::stroke::{CleanStroke, clean_stroke};
-use crate::width::{WIDE_CAP, Walks, colour_distance, median_colour};
+use crate::width::{WIDE_CAP, Walks, chroma, colour_distance, median_colour};
 use crate::{IndexImage, PathError, TraceParams};
 
 /// How a piece of the path ended.
@@ -596,13 +596,6 @@ fn principal_halves(colours: &[[f32; 3]], centre: [f32; 3]) -> Option<[[f32; 3];
     let (ahead, behind): (Vec<[f32; 3]>, Vec<[f32; 3]>) =
         colours.iter().partition(|c| offset(c).iter().zip(&axis).map(|(a, b)| a * b).sum::<f32>() > 0.0);
     (!ahead.is_empty() && !behind.is_empty()).then(|| [median_colour(&behind), median_colour(&ahead)])
-}
-
-/// `colour` over the sum of its channels (0.1 at least): its hue and saturation without its
-/// brightness, which shading changes.
-fn chroma(colour: [f32; 3]) -> [f32; 3] {
-    let sum = colour.iter().sum::<f32>().max(0.1);
-    colour.map(|c| c / sum)
 }
 
 /// Pixels within `cover_px` of any path pixel found so far.

@@ -554,6 +554,22 @@ fn the_radius_of_a_shaded_rope_against_the_background_or_a_wall_behind_is_its_si
 }
 
 #[test]
+fn the_radius_of_a_rope_shaded_in_brightness_only_is_its_width_though_a_wall_lies_just_behind() {
+    // The rope above just before a wall 1.3 behind (its walks end on the wall, not as a silhouette),
+    // its colour darkening across it to 0.2 of its lit side's but keeping its hue, as a capture's
+    // baked light and shade do (a tree branch's): by RGB its colour width was 3 px, a third of it.
+    let params = TraceParams { focal_px: FOCAL, band_px: 6.0, ..TraceParams::default() };
+    let stroke = [[2.5, 20.5], [77.5, 20.5]];
+    let shaded = |row: usize| {
+        let light = 1.0 - 0.1 * row.saturating_sub(16) as f32;
+        if (16..=24).contains(&row) { [0.9 * light, 0.7 * light, 0.2 * light] } else { [0.5; 3] }
+    };
+    let before_a_wall = Synthetic::new(80, 40, FOCAL, |_, row| Some(if (16..=24).contains(&row) { 5.0 } else { 6.3 }));
+    let radius = before_a_wall.radius_with_colours(&stroke, &params, shaded);
+    assert!((radius - 0.225).abs() < 0.02, "R = {radius} (the rope's half-width: 4.5 px at 5 / 100)");
+}
+
+#[test]
 fn a_flat_bar_seen_obliquely_measures_its_whole_width() {
     // A bar 15 px wide (rows 13..=27) whose depth rises by 2 px of world size per pixel across it
     // (seen at about 63 degrees), with the centres scattered in depth by up to 12 px, in front of a

@@ -15,6 +15,14 @@ const MAX_MISSES: usize = 1;
 /// at the scene behind a silhouette instead of crossing it. Centres on one surface scatter by less.
 const FAR_GAPS: f32 = 3.0;
 
+/// A pixel is off the part's colour (`Walks::cross_width` with a colour) only where its hue differs
+/// too, by this much in chroma (each colour over the sum of its channels): a capture's baked shading
+/// changes a colour's brightness, not its hue. A tree branch's lit and shaded sides, (0.95, 0.73,
+/// 0.29) and (0.62, 0.50, 0.21), lie 0.02 apart: by RGB alone a stroke over the middle half of the
+/// centre branch in az060 measured its lit side, 0.30 of its radius (docs/extraction.md, "A part
+/// lying on a surface", Shading is not a surface).
+const CHROMA_OFF: f32 = 0.05;
+
 /// Reusable buffers for measuring widths (one per thread): a trace measures thousands, and these
 /// keep them from allocating. Each way holds the depth of every pixel walked, NaN where it failed,
 /// and the pixel itself.
@@ -32,9 +40,9 @@ pub(crate) struct Walks {
 impl Walks {
     /// Width in pixels of the surface at pixel `p` across the unit direction `normal`, walking at
     /// most `max_px` each way (then the width is `2 * max_px + 1`). With `colour` (the part's colour
-    /// and how far off it may be, RGB Euclidean), pixels whose Gaussian's colour is farther off fail
-    /// as uncovered ones do: a part lying on a surface at its own depth (a rope on a floor, a
-    /// sprinkle on icing) has no depth edge beside it.
+    /// and how far off it may be, RGB Euclidean), pixels whose Gaussian's colour is farther off, and
+    /// of another hue (`CHROMA_OFF`), fail as uncovered ones do: a part lying on a surface at its own
+    /// depth (a rope on a floor, a sprinkle on icing) has no depth edge beside it.
     pub fn cross_width(
         &mut self,
         image: &IndexImage,
@@ -58,8 +66,11 @@ impl Walks {
         max_px: usize,
         colour: Option<([f32; 3], f32)>,
     ) -> f32 {
-        let off_colour =
-            |q: usize| colour.zip(image.colour(q)).is_some_and(|((a, off), b)| colour_distance(a, b) > off);
+        let off_colour = |q: usize| {
+            colour.zip(image.colour(q)).is_some_and(|((a, off), b)| {
+                colour_distance(a, b) > off && colour_distance(chroma(a), chroma(b)) > CHROMA_OFF
+            })
+        };
         let (col, row) = ((p % image.width) as f32 + 0.5, (p / image.width) as f32 + 0.5);
         let z0 = image.depth(p);
         let gap = GAP_FLOOR_PX * z0 / focal_px;
@@ -249,4 +260,11 @@ pub(crate) fn median_colour(colours: &[[f32; 3]]) -> [f32; 3] {
 /// The RGB Euclidean distance between two colours.
 pub(crate) fn colour_distance(a: [f32; 3], b: [f32; 3]) -> f32 {
     a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>().sqrt()
+}
+
+/// `colour` over the sum of its channels (0.1 at least): its hue and saturation without its
+/// brightness, which shading changes.
+pub(crate) fn chroma(colour: [f32; 3]) -> [f32; 3] {
+    let sum = colour.iter().sum::<f32>().max(0.1);
+    colour.map(|c| c / sum)
 }
