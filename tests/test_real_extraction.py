@@ -451,6 +451,25 @@ def test_a_branch_shaded_across_estimates_its_radius_from_its_width_not_its_ligh
         )
 
 
+@pytest.mark.parametrize(("name", "view"), [("plant_main_stem", "az315"), ("tree_branch_lower_left", "az045")])
+def test_a_rod_running_across_its_stroke_is_refused_and_says_why(name, view):
+    """The last half of the stroke over its rod (`realcases.part_strokes`): over the main stem in
+    az315 it lies on a leaf hiding the stem, over the lower left branch in az045 on the nearer
+    finger hiding it. Their rods ran across the strokes, at 65 and 46 degrees, 28.8 `R` from the
+    part and on two fingers: refused, with what to change (docs/extraction.md, "Failures", A rod
+    across its stroke)."""
+    scene, case, camera, stroke = _case_view("cases", name, view)
+    drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
+    half = part_strokes(stroke, camera, drawn.polyline, 0.5)[2]
+    with pytest.raises(PathNotFoundError, match="runs across the stroke") as failure:
+        extract_rod(scene, camera, half, radius=case["radius"])
+    assert len(failure.value.pixel_path) > 0  # the overlay still draws the path it found
+    assert "could not be followed" in describe_failure(failure.value)
+    # its first half follows the part
+    first = extract_rod(scene, camera, part_strokes(stroke, camera, drawn.polyline, 0.5)[0], radius=case["radius"])
+    assert polyline_agreement(drawn.polyline, first.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
+
+
 def test_a_foot_receding_behind_a_leg_keeps_its_rod_past_the_leg():
     """The stand's back foot in az090 (held out) recedes towards the camera, 17 R nearer at the
     stroke's end than at its start, and a leg crosses in front of it halfway. The depth chain runs

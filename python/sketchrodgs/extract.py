@@ -454,6 +454,16 @@ def _extract(
     spacing = edge_length if edge_length is not None else pl.default_edge_length(length, radius)
     _check_vertex_count("edge_length", length, spacing, spacing, MAX_ROD_VERTICES)
     polyline = pl.resample(points, spacing)
+    crossing = _turn_from_stroke(camera, polyline, stroke, radius)
+    if crossing > _CROSSING_DEG:
+        raise _failure(
+            f"the rod found runs across the stroke ({crossing:.0f} degrees from it), not along it: the part "
+            "may be hidden there by a leaf or body, or the stroke may run over two parts; draw the stroke "
+            "along where the part is seen",
+            stroke,
+            pixel_path,
+            pieces,
+        )
     if flip:
         polyline, path_ids = polyline[::-1].copy(), path_ids[::-1].copy()
     timings["polyline"] = time.perf_counter() - clock
@@ -514,6 +524,32 @@ _EDGE_PATH_PX = 20
 # (`_off_occluders_at_breaks`).
 _BREAK_AHEAD_R = 2.0
 _BREAK_WINDOW_R = (3.0, 8.0)
+
+
+# A rod whose chord on screen, at least two radii long, turns more than this from the stroke's over
+# the same stretch does not follow the stroke: it crossed a leaf hiding the part, or two parts
+# (docs/extraction.md, "Failures", A rod across its stroke)
+_CROSSING_DEG = 40.0
+
+
+def _turn_from_stroke(camera: Camera, polyline: np.ndarray, stroke: np.ndarray, radius: float) -> float:
+    """The angle in degrees between the lines of `polyline`'s chord on screen and of `stroke`'s chord
+    between its points nearest the polyline's projected ends; 0 where the polyline's chord is under
+    two radii on screen (too short to have a direction) or the stroke's stretch is a point."""
+    ends, depth = camera.project(polyline[[0, -1]])
+    chord = ends[1] - ends[0]
+    radius_px = radius * camera.fx / max(float(np.mean(depth)), 1e-12)
+    if not np.linalg.norm(chord) >= 2 * radius_px:
+        return 0.0
+    arc = pl.arc_lengths(stroke)
+    at = np.linspace(0.0, arc[-1], 1000)
+    dense = np.stack([np.interp(at, arc, stroke[:, 0]), np.interp(at, arc, stroke[:, 1])], axis=1)
+    nearest = np.argmin(np.linalg.norm(dense[:, None] - ends[None], axis=2), axis=0)
+    along = dense[nearest[1]] - dense[nearest[0]]
+    if not np.linalg.norm(along) > 0:
+        return 0.0
+    cosine = abs(chord @ along) / (np.linalg.norm(chord) * np.linalg.norm(along))
+    return float(np.degrees(np.arccos(min(cosine, 1.0))))
 
 
 class _Traced(NamedTuple):

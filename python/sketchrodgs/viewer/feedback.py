@@ -32,6 +32,11 @@ FAILURES = (
     ("single point", "The stroke is a single point: drag along the part, from end to end."),
     ("not its edge", "The stroke runs along the part's edge: draw it along the part's middle."),
     (
+        "runs across the stroke",
+        "The part could not be followed under the stroke: something hides it there, or the stroke runs "
+        "over two parts. Draw along where the part is seen.",
+    ),
+    (
         "too short for a rod",
         "The part under the stroke is too short for a rod: draw along more of it, or set a smaller "
         "radius R under Sketch settings.",
