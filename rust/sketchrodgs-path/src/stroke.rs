@@ -270,6 +270,8 @@ pub(crate) fn clean_stroke(
                 || gains_where_they_differ(&all[first..=last], &chain, &arc, depth_gap, focal_px))
         {
             (chain, behind) = (all[first..=last].to_vec(), true);
+        } else if hidden_all_along(&all, score, &chain, front_score) {
+            (chain, behind) = (all, true);
         }
     }
     cut_occluder_ends(&mut chain, &arc, depth_gap, focal_px);
@@ -364,6 +366,20 @@ fn depth_along(chain: &[(usize, Candidate)], arc: &[f32]) -> Vec<f32> {
         }
     }
     depth
+}
+
+/// Whether the chain behind, `behind` (scoring `score`), is the part though seen nowhere under the
+/// stroke: none of its members visible, over a visible chain `front` (scoring `front_score`) whose
+/// surfaces are `OCCLUDER_BROAD` radii wider than the part on average, a leaf or body the whole
+/// stroke lies on (the upper half of a stem that a leaf hides), and scoring `BEHIND_GAIN` more
+/// (docs/extraction.md, "What lies behind", Seen nowhere).
+fn hidden_all_along(behind: &[(usize, Candidate)], score: f32, front: &[(usize, Candidate)], front_score: f32) -> bool {
+    let broad = || front.iter().map(|m| m.1.wide).sum::<f32>() / front.len() as f32 >= OCCLUDER_BROAD;
+    behind.len() >= 2
+        && behind.iter().all(|m| m.1.layer > 0)
+        && !front.is_empty()
+        && score > front_score * (1.0 + BEHIND_GAIN)
+        && broad()
 }
 
 /// Whether the chain behind, `behind` (cut to its visible ends), scores `BEHIND_GAIN` more than the
@@ -1363,6 +1379,27 @@ mod tests {
         assert!(!gains(60..100, 3.0), "at the other end likewise");
         assert!(!gains(50..63, 3.0), "13 samples, 36 px from the first to the last: under 4 R");
         assert!(gains(50..65, 3.0), "15 samples, 42 px: over 4 R");
+    }
+
+    #[test]
+    fn a_part_seen_nowhere_is_the_chain_behind_only_where_the_stroke_lies_on_a_leaf_or_body() {
+        // 40 samples: in front a surface `wide` radii wider than the part (score 0.5), behind it a
+        // slender one hidden everywhere (0.9 x 0.95)
+        let chains = |wide: f32, hidden: usize| {
+            let front: Vec<_> = (0..40)
+                .map(|i| (i, Candidate { depth: 0.9, score: 0.5, near: 1.0, pixel: i, layer: 0, wide }))
+                .collect();
+            let behind: Vec<_> = (0..40)
+                .map(|i| {
+                    let layer = usize::from(i < hidden);
+                    (i, Candidate { depth: 1.0, score: 0.855, near: 1.0, pixel: i, layer, wide: 0.0 })
+                })
+                .collect();
+            hidden_all_along(&behind, 0.855 * 40.0, &front, 0.5 * 40.0)
+        };
+        assert!(chains(3.0, 40), "a leaf over the whole stroke: the stem behind it");
+        assert!(!chains(1.0, 40), "a slender surface in front (a rope on a floor) stays");
+        assert!(!chains(3.0, 39), "seen at a sample: the cut to the visible ends decides");
     }
 
     #[test]
