@@ -1,8 +1,8 @@
 """How cleanly a deformed scene follows its rods (issue: pulled real objects deform cleanly):
 needles that stick out of a bend, neighbours that tear apart, and pieces left behind where the
-part was, each comparing a scene at rest
-with the same scene deformed, row for row, in units of the rod's radius R; and a ground truth,
-a synthetic tube bent into an arc by the exact continuum map, rendered against our skinning.
+part was, each comparing a scene at rest with the same scene deformed, row for row, in units of
+the rod's radius R; and a ground truth, a synthetic tube bent into an arc by the exact continuum
+map, rendered against our skinning.
 
 Used by `tests/test_deform.py` (asserted) and `benches/bench_skin.py` (printed).
 """
