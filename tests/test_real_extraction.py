@@ -468,14 +468,16 @@ def test_a_rod_running_across_its_stroke_is_refused_and_says_why():
     assert polyline_agreement(drawn.polyline, first.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
 
 
-def test_a_stroke_lying_wholly_on_the_leaf_that_hides_a_stem_follows_the_stem_behind():
-    """The last half of the main stem's stroke over its rod in az315 (`realcases.part_strokes`)
-    lies on a leaf that hides the stem under all of it: the chain behind, seen at neither end, was
-    not taken, and the rod lay on the leaf across the stroke, 28.8 `R` from the stem
-    (docs/extraction.md, "What lies behind", Seen nowhere)."""
-    scene, case, camera, stroke = _case_view("cases", "plant_main_stem", "az315")
+@pytest.mark.parametrize(("name", "view", "k"), [("plant_main_stem", "az315", 2), ("plant_side_stem_long", "az045", 1)])
+def test_a_stroke_lying_wholly_on_the_leaf_that_hides_a_stem_follows_the_stem_behind(name, view, k):
+    """Halves of the strokes over their rods (`realcases.part_strokes`): the main stem's last in
+    az315 lies on a leaf that hides the stem under all of it, the long side stem's middle in az045
+    on one that hides it but at two neighbouring samples. The chains behind, seen at neither end or
+    over less than a rod, were not taken, and the rods lay on the leaves, 28.8 and 36.7 `R` from
+    the stems (docs/extraction.md, "What lies behind", Seen nowhere)."""
+    scene, case, camera, stroke = _case_view("cases", name, view)
     drawn = extract_rod(scene, camera, stroke, radius=case["radius"])
-    half = part_strokes(stroke, camera, drawn.polyline, 0.5)[2]
+    half = part_strokes(stroke, camera, drawn.polyline, 0.5)[k]
     rod = extract_rod(scene, camera, half, radius=case["radius"])
     assert polyline_agreement(drawn.polyline, rod.polyline, case["radius"])["max"] <= TARGETS["jitter_max"]
     assert polyline_length(rod.polyline) > 0.8 * 0.5 * polyline_length(drawn.polyline)

@@ -270,7 +270,7 @@ pub(crate) fn clean_stroke(
                 || gains_where_they_differ(&all[first..=last], &chain, &arc, depth_gap, focal_px))
         {
             (chain, behind) = (all[first..=last].to_vec(), true);
-        } else if hidden_all_along(&all, score, &chain, front_score) {
+        } else if hidden_all_along(&all, score, &chain, front_score, &arc, depth_gap, focal_px) {
             (chain, behind) = (all, true);
         }
     }
@@ -369,17 +369,27 @@ fn depth_along(chain: &[(usize, Candidate)], arc: &[f32]) -> Vec<f32> {
 }
 
 /// Whether the chain behind, `behind` (scoring `score`), is the part though seen nowhere under the
-/// stroke: none of its members visible, over a visible chain `front` (scoring `front_score`) whose
-/// surfaces are `OCCLUDER_BROAD` radii wider than the part on average, a leaf or body the whole
-/// stroke lies on (the upper half of a stem that a leaf hides), and scoring `BEHIND_GAIN` more
-/// (docs/extraction.md, "What lies behind", Seen nowhere).
-fn hidden_all_along(behind: &[(usize, Candidate)], score: f32, front: &[(usize, Candidate)], front_score: f32) -> bool {
+/// stroke, or over less than a rod (`BEHIND_SPAN_R` on screen; `arc` the samples' arc lengths):
+/// over a visible chain `front` (scoring `front_score`) whose surfaces are `OCCLUDER_BROAD` radii
+/// wider than the part on average, a leaf or body the whole stroke lies on (the upper half of a
+/// stem that a leaf hides), and scoring `BEHIND_GAIN` more (docs/extraction.md, "What lies behind",
+/// Seen nowhere).
+fn hidden_all_along(
+    behind: &[(usize, Candidate)],
+    score: f32,
+    front: &[(usize, Candidate)],
+    front_score: f32,
+    arc: &[f32],
+    depth_gap: f32,
+    focal_px: f32,
+) -> bool {
+    let first = behind.iter().position(|m| m.1.layer == 0);
+    let last = behind.iter().rposition(|m| m.1.layer == 0);
+    let seen = first.zip(last).is_some_and(|(f, l)| {
+        arc[behind[l].0] - arc[behind[f].0] >= on_screen(BEHIND_SPAN_R, depth_gap, focal_px, behind[f].1.depth)
+    });
     let broad = || front.iter().map(|m| m.1.wide).sum::<f32>() / front.len() as f32 >= OCCLUDER_BROAD;
-    behind.len() >= 2
-        && behind.iter().all(|m| m.1.layer > 0)
-        && !front.is_empty()
-        && score > front_score * (1.0 + BEHIND_GAIN)
-        && broad()
+    behind.len() >= 2 && !seen && !front.is_empty() && score > front_score * (1.0 + BEHIND_GAIN) && broad()
 }
 
 /// Whether the chain behind, `behind` (cut to its visible ends), scores `BEHIND_GAIN` more than the
@@ -1383,8 +1393,10 @@ mod tests {
 
     #[test]
     fn a_part_seen_nowhere_is_the_chain_behind_only_where_the_stroke_lies_on_a_leaf_or_body() {
-        // 40 samples: in front a surface `wide` radii wider than the part (score 0.5), behind it a
-        // slender one hidden everywhere (0.9 x 0.95)
+        // 40 samples 3 px apart (focal 1000 px, depth 1, the gap 0.03: R 10 px on screen, a rod's
+        // 2 R 20 px): in front a surface `wide` radii wider than the part (score 0.5), behind it a
+        // slender one (0.9 x 0.95), seen at its last `40 - hidden` samples
+        let arc: Vec<f32> = (0..40).map(|i| 3.0 * i as f32).collect();
         let chains = |wide: f32, hidden: usize| {
             let front: Vec<_> = (0..40)
                 .map(|i| (i, Candidate { depth: 0.9, score: 0.5, near: 1.0, pixel: i, layer: 0, wide }))
@@ -1395,11 +1407,12 @@ mod tests {
                     (i, Candidate { depth: 1.0, score: 0.855, near: 1.0, pixel: i, layer, wide: 0.0 })
                 })
                 .collect();
-            hidden_all_along(&behind, 0.855 * 40.0, &front, 0.5 * 40.0)
+            hidden_all_along(&behind, 0.855 * 40.0, &front, 0.5 * 40.0, &arc, 0.03, 1000.0)
         };
         assert!(chains(3.0, 40), "a leaf over the whole stroke: the stem behind it");
         assert!(!chains(1.0, 40), "a slender surface in front (a rope on a floor) stays");
-        assert!(!chains(3.0, 39), "seen at a sample: the cut to the visible ends decides");
+        assert!(chains(3.0, 34), "seen over 15 px, under a rod: the stem behind it");
+        assert!(!chains(3.0, 32), "seen over 21 px: the cut to the visible ends decides");
     }
 
     #[test]
