@@ -18,14 +18,13 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from .polyline import arc_lengths
+from .polyline import arc_lengths, nearest_on_polyline, point_at
 
 # Directed distances are taken from points this far apart along the polyline, at most (as a
 # fraction of the radius), and from no more than MAX_SAMPLES points.
 SAMPLE_SPACING = 0.25
 MAX_SAMPLES = 4000
 MIN_SAMPLES = 200
-_CHUNK = 512  # points per block in the point-to-segment search
 
 
 def _as_polyline(points: np.ndarray, dims: int, name: str) -> np.ndarray:
@@ -37,44 +36,15 @@ def _as_polyline(points: np.ndarray, dims: int, name: str) -> np.ndarray:
     return array
 
 
-def _point_at(points: np.ndarray, arc: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Points at arc lengths `s` along the polyline (linear interpolation)."""
-    return np.stack([np.interp(s, arc, points[:, k]) for k in range(points.shape[1])], axis=1)
-
-
 def _resample(points: np.ndarray, count: int) -> np.ndarray:
     """`count` points evenly spaced in arc length, both ends included."""
     arc = arc_lengths(points)
-    return _point_at(points, arc, np.linspace(0.0, arc[-1], count))
-
-
-def _nearest_on_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from each point to `polyline` and the arc length of the nearest point on it."""
-    starts, ends = polyline[:-1], polyline[1:]
-    edges = ends - starts
-    lengths2 = np.einsum("ij,ij->i", edges, edges)
-    safe = np.where(lengths2 > 0, lengths2, 1.0)
-    arc = arc_lengths(polyline)
-    seg_len = np.sqrt(lengths2)
-    distance = np.empty(len(points))
-    where = np.empty(len(points))
-    for lo in range(0, len(points), _CHUNK):
-        block = points[lo : lo + _CHUNK]
-        rel = block[:, None, :] - starts[None, :, :]
-        t = np.clip(np.einsum("pmk,mk->pm", rel, edges) / safe, 0.0, 1.0)
-        t = np.where(lengths2 > 0, t, 0.0)
-        diff = rel - t[:, :, None] * edges[None, :, :]
-        d2 = np.einsum("pmk,pmk->pm", diff, diff)
-        best = np.argmin(d2, axis=1)
-        rows = np.arange(len(block))
-        distance[lo : lo + _CHUNK] = np.sqrt(d2[rows, best])
-        where[lo : lo + _CHUNK] = arc[best] + t[rows, best] * seg_len[best]
-    return distance, where
+    return point_at(points, arc, np.linspace(0.0, arc[-1], count))
 
 
 def _directed(samples: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distances from `samples` to `other` and whether each projects inside `other`."""
-    distance, where = _nearest_on_polyline(samples, other)
+    distance, where = nearest_on_polyline(samples, other)
     total = arc_lengths(other)[-1]
     eps = 1e-9 * max(total, 1e-300)
     inside = (where > eps) & (where < total - eps)
@@ -157,10 +127,10 @@ def _end_tangent(stroke: np.ndarray, arc: np.ndarray, at_start: bool, span: floa
     total = arc[-1]
     span = min(span, 0.5 * total)
     if at_start:
-        inner = _point_at(stroke, arc, np.array([span]))[0]
+        inner = point_at(stroke, arc, np.array([span]))[0]
         out = stroke[0] - inner
     else:
-        inner = _point_at(stroke, arc, np.array([total - span]))[0]
+        inner = point_at(stroke, arc, np.array([total - span]))[0]
         out = stroke[-1] - inner
     norm = np.linalg.norm(out)
     if norm == 0:
@@ -183,7 +153,7 @@ def _change_ends(stroke: np.ndarray, choices: tuple[int, int], amount: float) ->
     if choices[1] < 0 and end_s - start_s >= 2 * amount:
         end_s = total - amount
     keep = (arc > start_s) & (arc < end_s)
-    ends = _point_at(stroke, arc, np.array([start_s, end_s]))
+    ends = point_at(stroke, arc, np.array([start_s, end_s]))
     points = np.vstack([ends[:1], stroke[keep], ends[1:]])
     if choices[0] > 0:
         points = np.vstack([stroke[0] + amount * _end_tangent(stroke, arc, True, amount), points])

@@ -541,11 +541,9 @@ def _turn_from_stroke(camera: Camera, polyline: np.ndarray, stroke: np.ndarray, 
     radius_px = radius * camera.fx / max(float(np.mean(depth)), 1e-12)
     if not np.linalg.norm(chord) >= 2 * radius_px:
         return 0.0
-    arc = pl.arc_lengths(stroke)
-    at = np.linspace(0.0, arc[-1], 1000)
-    dense = np.stack([np.interp(at, arc, stroke[:, 0]), np.interp(at, arc, stroke[:, 1])], axis=1)
-    nearest = np.argmin(np.linalg.norm(dense[:, None] - ends[None], axis=2), axis=0)
-    along = dense[nearest[1]] - dense[nearest[0]]
+    _, at = pl.nearest_on_polyline(ends, stroke)
+    over = pl.point_at(stroke, pl.arc_lengths(stroke), at)
+    along = over[1] - over[0]
     if not np.linalg.norm(along) > 0:
         return 0.0
     cosine = abs(chord @ along) / (np.linalg.norm(chord) * np.linalg.norm(along))

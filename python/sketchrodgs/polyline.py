@@ -523,6 +523,40 @@ def arc_lengths(points: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(np.asarray(points, np.float64), axis=0), axis=1))])
 
 
+def point_at(points: np.ndarray, arc: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Points at arc lengths `s` along the polyline `points` (any dimension) whose arc lengths are
+    `arc` (linear interpolation)."""
+    return np.stack([np.interp(s, arc, points[:, k]) for k in range(points.shape[1])], axis=1)
+
+
+_NEAREST_CHUNK = 512  # points per block in the point-to-segment search
+
+
+def nearest_on_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from each of `points` to `polyline` (any dimension) and the arc length of the
+    nearest point on it."""
+    starts, ends = polyline[:-1], polyline[1:]
+    edges = ends - starts
+    lengths2 = np.einsum("ij,ij->i", edges, edges)
+    safe = np.where(lengths2 > 0, lengths2, 1.0)
+    arc = arc_lengths(polyline)
+    seg_len = np.sqrt(lengths2)
+    distance = np.empty(len(points))
+    where = np.empty(len(points))
+    for lo in range(0, len(points), _NEAREST_CHUNK):
+        block = points[lo : lo + _NEAREST_CHUNK]
+        rel = block[:, None, :] - starts[None, :, :]
+        t = np.clip(np.einsum("pmk,mk->pm", rel, edges) / safe, 0.0, 1.0)
+        t = np.where(lengths2 > 0, t, 0.0)
+        diff = rel - t[:, :, None] * edges[None, :, :]
+        d2 = np.einsum("pmk,pmk->pm", diff, diff)
+        best = np.argmin(d2, axis=1)
+        rows = np.arange(len(block))
+        distance[lo : lo + _NEAREST_CHUNK] = np.sqrt(d2[rows, best])
+        where[lo : lo + _NEAREST_CHUNK] = arc[best] + t[rows, best] * seg_len[best]
+    return distance, where
+
+
 def polyline_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 

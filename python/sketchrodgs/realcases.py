@@ -270,16 +270,14 @@ def part_strokes(stroke: np.ndarray, camera: Camera, rod: np.ndarray, share: flo
     user selects the stretch of a stem to pull (docs/real_captures.md, "Part of a part")."""
     stroke = np.asarray(stroke, np.float64)
     arc = pl.arc_lengths(stroke)
-    at = np.linspace(0.0, arc[-1], 2001)
-    dense = np.stack([np.interp(at, arc, stroke[:, 0]), np.interp(at, arc, stroke[:, 1])], axis=1)
     ends, _ = camera.project(np.asarray(rod, np.float64)[[0, -1]])
-    start, stop = sorted(at[np.argmin(np.linalg.norm(dense[:, None] - ends[None], axis=2), axis=0)])
+    start, stop = sorted(pl.nearest_on_polyline(ends, stroke)[1])
     span = stop - start
     strokes = []
     for begin in (0.0, (1.0 - share) / 2, 1.0 - share):
         lo, hi = start + begin * span, start + (begin + share) * span
         inside = (arc > lo) & (arc < hi)
-        ends_of = np.stack([np.interp([lo, hi], arc, stroke[:, 0]), np.interp([lo, hi], arc, stroke[:, 1])], axis=1)
+        ends_of = pl.point_at(stroke, arc, np.array([lo, hi]))
         strokes.append(np.vstack([ends_of[:1], stroke[inside], ends_of[1:]]))
     return strokes
 

@@ -256,21 +256,13 @@ pub(crate) fn clean_stroke(
         let (all, score) = depth_chain(&candidates, &arc, depth_gap, focal_px);
         // the object is seen at the chain's ends: a part running behind something there is
         // most often one joining it (a branch behind its trunk)
-        let first = all.iter().position(|m| m.1.layer == 0);
-        let last = all.iter().rposition(|m| m.1.layer == 0);
-        // (at two samples at least: a chain behind seen at one runs behind the part itself,
-        // as the floor under a rope lying on it, where the rope measures as wide as the floor)
-        // (and over two radii on screen at least, as short as a rod may be: cut to two
-        // neighbouring samples, a chain behind made a path of one pixel on a sprinkle seen
-        // close up, and the stroke was refused)
-        if let (Some(first), Some(last)) = (first, last)
-            && last > first
-            && arc[all[last].0] - arc[all[first].0] >= on_screen(BEHIND_SPAN_R, depth_gap, focal_px, all[first].1.depth)
+        let seen = seen_stretch(&all, &arc, depth_gap, focal_px);
+        if let Some((first, last)) = seen
             && (score > front_score * (1.0 + BEHIND_GAIN)
                 || gains_where_they_differ(&all[first..=last], &chain, &arc, depth_gap, focal_px))
         {
             (chain, behind) = (all[first..=last].to_vec(), true);
-        } else if hidden_all_along(&all, score, &chain, front_score, &arc, depth_gap, focal_px) {
+        } else if seen.is_none() && hidden_all_along(&all, score, &chain, front_score) {
             (chain, behind) = (all, true);
         }
     }
@@ -368,28 +360,28 @@ fn depth_along(chain: &[(usize, Candidate)], arc: &[f32]) -> Vec<f32> {
     depth
 }
 
-/// Whether the chain behind, `behind` (scoring `score`), is the part though seen nowhere under the
-/// stroke, or over less than a rod (`BEHIND_SPAN_R` on screen; `arc` the samples' arc lengths):
-/// over a visible chain `front` (scoring `front_score`) whose surfaces are `OCCLUDER_BROAD` radii
-/// wider than the part on average, a leaf or body the whole stroke lies on (the upper half of a
-/// stem that a leaf hides), and scoring `BEHIND_GAIN` more (docs/extraction.md, "What lies behind",
-/// Seen nowhere).
-fn hidden_all_along(
-    behind: &[(usize, Candidate)],
-    score: f32,
-    front: &[(usize, Candidate)],
-    front_score: f32,
-    arc: &[f32],
-    depth_gap: f32,
-    focal_px: f32,
-) -> bool {
-    let first = behind.iter().position(|m| m.1.layer == 0);
-    let last = behind.iter().rposition(|m| m.1.layer == 0);
-    let seen = first.zip(last).is_some_and(|(f, l)| {
-        arc[behind[l].0] - arc[behind[f].0] >= on_screen(BEHIND_SPAN_R, depth_gap, focal_px, behind[f].1.depth)
-    });
+/// The positions in the chain behind, `behind`, of its first and last visible members, where they
+/// lie over a rod apart on screen (`BEHIND_SPAN_R`; `arc` the samples' arc lengths); None where it
+/// is seen nowhere or over less. (At two samples at least: a chain behind seen at one runs behind
+/// the part itself, as the floor under a rope lying on it, where the rope measures as wide as the
+/// floor. Over two radii: cut to two neighbouring samples, a chain behind made a path of one pixel
+/// on a sprinkle seen close up, and the stroke was refused.)
+fn seen_stretch(behind: &[(usize, Candidate)], arc: &[f32], depth_gap: f32, focal_px: f32) -> Option<(usize, usize)> {
+    let first = behind.iter().position(|m| m.1.layer == 0)?;
+    let last = behind.iter().rposition(|m| m.1.layer == 0)?;
+    let span = arc[behind[last].0] - arc[behind[first].0];
+    (last > first && span >= on_screen(BEHIND_SPAN_R, depth_gap, focal_px, behind[first].1.depth))
+        .then_some((first, last))
+}
+
+/// Whether the chain behind, `behind` (scoring `score`), seen nowhere under the stroke or over less
+/// than a rod (`seen_stretch` None), is the part: over a visible chain `front` (scoring
+/// `front_score`) whose surfaces are `OCCLUDER_BROAD` radii wider than the part on average, a leaf
+/// or body the whole stroke lies on (the upper half of a stem that a leaf hides), and scoring
+/// `BEHIND_GAIN` more (docs/extraction.md, "What lies behind", Seen nowhere).
+fn hidden_all_along(behind: &[(usize, Candidate)], score: f32, front: &[(usize, Candidate)], front_score: f32) -> bool {
     let broad = || front.iter().map(|m| m.1.wide).sum::<f32>() / front.len() as f32 >= OCCLUDER_BROAD;
-    behind.len() >= 2 && !seen && !front.is_empty() && score > front_score * (1.0 + BEHIND_GAIN) && broad()
+    behind.len() >= 2 && !front.is_empty() && score > front_score * (1.0 + BEHIND_GAIN) && broad()
 }
 
 /// Whether the chain behind, `behind` (cut to its visible ends), scores `BEHIND_GAIN` more than the
@@ -1407,7 +1399,8 @@ mod tests {
                     (i, Candidate { depth: 1.0, score: 0.855, near: 1.0, pixel: i, layer, wide: 0.0 })
                 })
                 .collect();
-            hidden_all_along(&behind, 0.855 * 40.0, &front, 0.5 * 40.0, &arc, 0.03, 1000.0)
+            seen_stretch(&behind, &arc, 0.03, 1000.0).is_none()
+                && hidden_all_along(&behind, 0.855 * 40.0, &front, 0.5 * 40.0)
         };
         assert!(chains(3.0, 40), "a leaf over the whole stroke: the stem behind it");
         assert!(!chains(1.0, 40), "a slender surface in front (a rope on a floor) stays");
