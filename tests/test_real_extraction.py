@@ -1,6 +1,6 @@
 """Extraction on real captures (tests/data/real_cases: 14 slender parts of the plant, guitar, tree
 and donut captures, 2-3 views each, 10 held-out parts of the same captures that no extraction
-was tuned on, and 18 more sprinkles whose strokes were made from the image's colour alone), scored
+was tuned on, 6 more drawn blind later (heldout2), and 18 more sprinkles whose strokes were made from the image's colour alone), scored
 as the issue asks, without a true axis: between views, against the reversed
 stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
 
@@ -45,6 +45,7 @@ DATA = Path(__file__).parent / "data" / "real_cases"
 CASE_FILES = {
     "cases": DATA / "cases.json",
     "heldout": DATA / "heldout_cases.json",
+    "heldout2": DATA / "heldout2_cases.json",
     "sprinkles": DATA / "sprinkle_cases.json",
 }
 JITTER = 10
@@ -52,15 +53,23 @@ JITTER = 10
 # Measured misses (see the module docstring), as "set/case".
 MISSES = {
     "unjittered": set(),
-    "cross_given": {"heldout/plant_petiole_right"},
-    "cross_estimated": {"heldout/plant_petiole_right"},
+    "cross_given": {"heldout/plant_petiole_right", "heldout2/guitar_cradle_hook_right"},
+    "cross_estimated": {
+        "heldout/plant_petiole_right",
+        "heldout2/guitar_cradle_hook_right",
+        "heldout2/guitar_cradle_hook_left",
+    },
     "jitter": {
         "heldout/plant_stem_back",
         "heldout/plant_petiole_right",
         "heldout/tree_branch_far_right",
+        "heldout2/guitar_cradle_hook_right",
     },
     "radius": {
         "heldout/donut_sprinkle_d",
+        "heldout2/tree_tip_back_centre",
+        "heldout2/guitar_cradle_hook_right",
+        "heldout2/guitar_cradle_hook_left",
         *(f"sprinkles/sprinkle_{k:02d}" for k in (15, 17)),
     },
     "end_gap": {"heldout/plant_petiole_right"},
@@ -157,7 +166,15 @@ def test_a_stroke_half_a_radius_off_the_middle_still_gives_a_rod(group):
     assert not failed, failed
 
 
-@pytest.mark.parametrize("group", sorted(CASE_FILES))
+@pytest.mark.parametrize(
+    "group",
+    [
+        pytest.param(g, marks=pytest.mark.xfail(strict=True, reason="a short stroke over sprinkle f in az090 fails"))
+        if g == "heldout2"
+        else g
+        for g in sorted(CASE_FILES)
+    ],
+)
 def test_a_stroke_three_diameters_long_gives_a_rod(group):
     """The issue's short stroke: 3 diameters along each view's rod where the part is seen
     (`realcases.short_stroke`) gives a rod, R given and estimated. Over sprinkle_15 in az000, whose

@@ -542,9 +542,14 @@ fn cut_turn_tail_signed(
     // Which side of the apex is the part: the more slender, else the longer.
     let mean_wide = |side: &[(usize, Candidate)]| side.iter().map(|m| m.1.wide).sum::<f32>() / side.len() as f32;
     let (run_wide, inner_wide) = (mean_wide(&chain[apex + 1..]), mean_wide(&chain[..apex]));
-    // The sides' lengths leave out the apex's plateau, the members within `TURN_FLAT_GAPS` of its
+    // The run's length leaves out the apex's plateau, the members within `TURN_FLAT_GAPS` of its
     // depth around it: which of them is the apex is a tie that a pixel's shift of the stroke breaks
-    // either way, and it moved a flat valley's length from one side to the other.
+    // either way, and it moved a flat valley's length from one side to the other. The plateau
+    // counts for the other side where the run comes towards the camera: a part lying level and then
+    // a run in front is what the stroke ran on over past the part (a cradle's other hook crossing
+    // in front). A run away from a level stretch can be the part receding (a sprinkle over the
+    // icing's rim), and there the plateau counts for neither side (docs/extraction.md, "Stroke
+    // clean-up", 6).
     let flat = TURN_FLAT_GAPS * depth_gap;
     let (mut low, mut high) = (apex, apex);
     while low > 0 && depth[low - 1] >= depth[apex] - flat {
@@ -553,7 +558,8 @@ fn cut_turn_tail_signed(
     while high + 1 < n && depth[high + 1] >= depth[apex] - flat {
         high += 1;
     }
-    let (run_span, inner_span) = ((end_arc - at[high]).abs(), (at[low] - at[0]).abs());
+    let inner_end = if sign > 0.0 { at[high] } else { at[low] };
+    let (run_span, inner_span) = ((end_arc - at[high]).abs(), (inner_end - at[0]).abs());
     if run_wide < inner_wide - TURN_WIDER || (run_wide <= inner_wide + TURN_WIDER && run_span > inner_span) {
         return;
     }
@@ -1471,6 +1477,24 @@ mod tests {
                 }
             };
             assert_eq!(cut(24, &flat_valley, &slender, at_end), 0, "the longer side beyond a flat bottom is the part");
+            // a part lying level for 60 px after 30 px receding gently, then a bar crossing in front
+            // that the stroke runs on over for 48 px, 63 degrees towards the camera (a cradle's
+            // other hook): the level stretch is the part, and counts for its side (about 95 px
+            // against 42). Beyond the plateau alone (15 px of the lead-in) the bar was the longer,
+            // and kept.
+            let level_then_bar = |x: f32| {
+                if x < 30.0 {
+                    1.0 + 0.001 * x
+                } else if x <= 90.0 {
+                    1.03
+                } else {
+                    1.03 - 0.002 * (x - 90.0)
+                }
+            };
+            assert!(
+                (16..=17).contains(&cut(47, &level_then_bar, &slender, at_end)),
+                "a bar in front after a level part: cut"
+            );
         }
     }
 }
