@@ -1,8 +1,8 @@
 """Extraction on real captures (tests/data/real_cases: 14 slender parts of the plant, guitar, tree
 and donut captures, 2-3 views each, 10 held-out parts of the same captures that no extraction
-was tuned on, 6 more drawn blind later (heldout2), and 18 more sprinkles whose strokes were made from the image's colour alone), scored
-as the issue asks, without a true axis: between views, against the reversed
-stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
+was tuned on, 6 more drawn blind later (heldout2), and 18 more sprinkles whose strokes were made
+from the image's colour alone), scored as the issue asks, without a true axis: between views,
+against the reversed stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
 
 What holds on every case is asserted outright. The per-case geometric targets are asserted per
 case; where a case does not meet a target yet it is marked xfail(strict): the test then fails the
