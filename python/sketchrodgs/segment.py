@@ -1,7 +1,7 @@
 """Segmentation and binding (docs/deformation.md, "Segmentation"): which Gaussians follow a rod,
 and where each sits on the rest polyline.
 
-Three sets, found over a proximity graph of Gaussian centres (centres closer than the link
+The sets, found over a proximity graph of Gaussian centres (centres closer than the link
 distance are neighbours, so a gap in the cloud separates parts):
 - the part: grown from the Gaussians within R of the axis over neighbours within `grow * R` of
   the axis and within the rod's extent along it, so that a cross-section that is not round (the
@@ -19,7 +19,10 @@ distance are neighbours, so a gap in the cloud separates parts):
 - strays: small clusters (at most `STRAY_SIZE` R across) within `STRAY_REACH` R of what moves past
   the rod's ends or of its attached parts, across a gap wider than a link but joined to nothing
   else (the halo of floaters around a guitar's headstock). Left behind, they would hang in the air
-  where the part was; each rides with the moving Gaussian nearest it.
+  where the part was; each rides with the moving Gaussian nearest it;
+- specks: such clusters that reach within `SPECK_RADII` R of the axis anywhere along it, inside
+  the part's tube but linked to nothing (two opaque Gaussians on a tree tip); bound as the part's
+  own Gaussians are.
 
 No band of partly moving Gaussians around the part: where the part has a gap around it there is
 nothing to blend with, and where it touches something (a crossing branch) a band 1 R wide made
@@ -65,6 +68,9 @@ STRAY_REACH = 1.0
 STRAY_SIZE = 2.0
 # ... past the rod's ends (within this many R of them along it) and around attached parts.
 STRAY_END_RADII = 2.0
+# Specks: such clusters that reach within SPECK_RADII R of the axis anywhere along the rod lie inside
+# the part's tube, a piece of its surface the proximity graph did not reach: they ride with it.
+SPECK_RADII = 1.5
 
 
 def default_attach_size(length: float, radius: float) -> float:
@@ -170,6 +176,7 @@ def segment_and_bind(
         bound = _Bound.of(binding, polyline, len(means))
         binding = _with_continuations(binding, bound, polyline, means, radius, continuation_size, colours, surface)
         binding = _with_strays(binding, bound, polyline, means, radius, attach_size)
+        binding = _with_specks(binding, polyline, means, radius, colours, surface)
     return replace(binding, gaussian_ids=rows[binding.gaussian_ids])
 
 
@@ -320,6 +327,56 @@ def _with_strays(
         np.ones(len(stray_rows), bool),
     )
     return binding.extend(strays)
+
+
+def _with_specks(
+    binding: Binding,
+    polyline: np.ndarray,
+    means: np.ndarray,
+    radius: float,
+    colours: np.ndarray,
+    surface: tuple[np.ndarray, np.ndarray] | None,
+) -> Binding:
+    """`binding` and the specks inside the part's tube: clusters of unbound Gaussians (linked as the
+    strays are) that reach within `SPECK_RADII` R of the axis anywhere along it and span at most
+    `STRAY_SIZE` R, each bound as the part's own Gaussians are, at its nearest point on the axis
+    (not attached: the separation cut may still leave it). Where the part lies on a `surface` of
+    another colour, rows of its colour are not specks (docs/deformation.md, "Segmentation")."""
+    taken = np.zeros(len(means), bool)
+    taken[binding.gaussian_ids] = True
+
+    def unbound_near(margin: float) -> np.ndarray:
+        rows = near_box(polyline, means, margin)
+        rows = rows[~taken[rows]]
+        return rows if surface is None else rows[~_nearer_second(colours[rows], *surface)]
+
+    # the seeds first (most rods have none), then what their clusters may reach
+    reach = SPECK_RADII * radius
+    near = unbound_near(reach)
+    _, _, distance = _core.nearest_on_polyline(_f32(polyline), _f32(np.take(means, near, axis=0)), reach)
+    near = near[distance <= reach]
+    if len(near) == 0:
+        return binding
+    link = _link(np.take(means, binding.gaussian_ids, axis=0), radius)
+    size = STRAY_SIZE * radius
+    rows = unbound_near(reach + size + link)
+    points = _f32(np.take(means, rows, axis=0))
+    seeds = np.flatnonzero(np.isin(rows, near))
+    goes = _core.small_clusters(points, link, seeds.astype(np.int64), size)
+    if not goes.any():
+        return binding
+    speck_rows = rows[goes]
+    centre = means[speck_rows].astype(np.float64)
+    segment, t, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), SPECK_RADII * radius + size)
+    specks = Binding(
+        speck_rows.astype(np.int64),
+        segment.astype(np.int32),
+        t.astype(np.float32),
+        (centre - point_at(polyline, segment, t)).astype(np.float32),
+        distance.astype(np.float32),
+        np.zeros(len(speck_rows), bool),
+    )
+    return binding.extend(specks)
 
 
 def _link(centres: np.ndarray, radius: float) -> float:
