@@ -318,15 +318,7 @@ def _with_strays(
     # no stray lies further from the axis than what moves, and a region more
     farthest = float(binding.distance.max()) + region
     _, _, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), farthest)
-    strays = Binding(
-        stray_rows.astype(np.int64),
-        segment.astype(np.int32),
-        t.astype(np.float32),
-        (centre - point_at(polyline, segment, t)).astype(np.float32),
-        distance.astype(np.float32),
-        np.ones(len(stray_rows), bool),
-    )
-    return binding.extend(strays)
+    return binding.extend(_bound_at(stray_rows, polyline, segment, t, centre, distance, attached=True))
 
 
 def _with_specks(
@@ -368,15 +360,29 @@ def _with_specks(
     speck_rows = rows[goes]
     centre = means[speck_rows].astype(np.float64)
     segment, t, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), SPECK_RADII * radius + size)
-    specks = Binding(
-        speck_rows.astype(np.int64),
+    return binding.extend(_bound_at(speck_rows, polyline, segment, t, centre, distance, attached=False))
+
+
+def _bound_at(
+    rows: np.ndarray,
+    polyline: np.ndarray,
+    segment: np.ndarray,
+    t: np.ndarray,
+    centre: np.ndarray,
+    distance: np.ndarray,
+    *,
+    attached: bool,
+) -> Binding:
+    """The binding of `rows` (centres `centre`, float64) at `(segment, t)` on `polyline`, each with
+    its own offset from there and its `distance` from the axis."""
+    return Binding(
+        rows.astype(np.int64),
         segment.astype(np.int32),
         t.astype(np.float32),
         (centre - point_at(polyline, segment, t)).astype(np.float32),
         distance.astype(np.float32),
-        np.zeros(len(speck_rows), bool),
+        np.full(len(rows), attached),
     )
-    return binding.extend(specks)
 
 
 def _link(centres: np.ndarray, radius: float) -> float:
