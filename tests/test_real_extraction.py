@@ -54,11 +54,7 @@ JITTER = 10
 MISSES = {
     "unjittered": set(),
     "cross_given": {"heldout/plant_petiole_right", "heldout2/guitar_cradle_hook_right"},
-    "cross_estimated": {
-        "heldout/plant_petiole_right",
-        "heldout2/guitar_cradle_hook_right",
-        "heldout2/guitar_cradle_hook_left",
-    },
+    "cross_estimated": {"heldout/plant_petiole_right", "heldout2/guitar_cradle_hook_right"},
     "jitter": {
         "heldout/plant_stem_back",
         "heldout/plant_petiole_right",
@@ -69,7 +65,6 @@ MISSES = {
         "heldout/donut_sprinkle_d",
         "heldout2/tree_tip_back_centre",
         "heldout2/guitar_cradle_hook_right",
-        "heldout2/guitar_cradle_hook_left",
         *(f"sprinkles/sprinkle_{k:02d}" for k in (15, 17)),
     },
     "end_gap": {"heldout/plant_petiole_right"},

@@ -42,6 +42,9 @@ _NEAR_PIXEL_RADII_WIDE = 2.0
 # Path pixels whose Gaussian lies farther than the wider reach get the Gaussian that owns them
 # without it, at most this many times over (`_past_far_owners`).
 _FAR_OWNER_ROUNDS = 2
+# The depth gap between surfaces is 3 R, but at least this many pixels' world size (the search's,
+# GAP_FLOOR_PX in rust/sketchrodgs-path/src/lib.rs; docs/extraction.md, "Stroke clean-up").
+_GAP_FLOOR_PX = 8.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -658,7 +661,7 @@ def _trace(
         # on a surface of another colour, the part's width is where its colour ends; an answer far
         # off the estimate (a few pixels of the part's colour) or a trace that then fails or is too
         # short for a rod keeps it
-        by_colour = _radius_by_colour(scene, index, depth, opacity, trace, focal)
+        by_colour = _radius_by_colour(scene, index, depth, opacity, trace, focal, radius)
         if by_colour is not None and 0.25 * radius <= by_colour <= 4 * radius:
             try:
                 again, again_pixels, again_ids, again_points = trace_path(by_colour)
@@ -727,11 +730,14 @@ def _radius_by_colour(
     opacity: np.ndarray,
     trace: _core.Trace,
     focal: float,
+    radius: float,
 ) -> float | None:
     """R of a part lying on a surface of another colour (`Trace.colours`), measured from the path:
-    from each path pixel, walk both ways across the clean stroke until a pixel shows nothing or a
-    Gaussian nearer the surface's colour than the part's (at most 1/8 of the image each way); R is
-    the median half-width in world units. The radius estimate walks from the stroke's samples, which
+    from each path pixel, walk both ways across the clean stroke until a pixel shows nothing, a
+    Gaussian nearer the surface's colour than the part's, or a depth over the depth gap (`radius`'s)
+    beyond every depth walked (at most 1/8 of the image each way); R is the median half-width in
+    world units. The depth ends a walk where the colour does not: a dark hook before a dark floor
+    (docs/extraction.md, "A part lying on a surface", The path's widths stop at a depth step). The radius estimate walks from the stroke's samples, which
     a stroke drawn beside the part puts on the surface, and stops by a colour taken under the
     stroke; the path keeps to the part (docs/extraction.md, "A part lying on a surface"). Only the
     path pixels that show a Gaussian of the part's colour are measured from: a stroke drawn on past
@@ -750,6 +756,8 @@ def _radius_by_colour(
     nearest = np.argmin(((pixels[:, None, :] - clean[None]) ** 2).sum(axis=2), axis=1)
     height, width = index.shape
     steps = np.arange(1, max(width, height) // 8 + 1)
+    start = depth[pixels[:, 1], pixels[:, 0]]
+    gap = np.maximum(3 * radius, _GAP_FLOOR_PX * start / focal)[:, None]
     reach = []
     for sign in (1, -1):
         walk = np.rint(pixels[:, None, :] + sign * steps[None, :, None] * normal[nearest][:, None, :]).astype(np.int64)
@@ -758,8 +766,12 @@ def _radius_by_colour(
         ids = index[row, col]
         on_part = _part_coloured(scene.colors_of(np.maximum(ids, 0).ravel()), trace.colours).reshape(ids.shape)
         stop = ~(inside & (ids >= 0) & (opacity[row, col] >= 0.5) & on_part)
+        # each step against the depths walked before it (only those before the first stop count)
+        z = depth[row, col]
+        walked = np.concatenate([start[:, None], z[:, :-1]], axis=1)
+        stop |= (z < np.minimum.accumulate(walked, axis=1) - gap) | (z > np.maximum.accumulate(walked, axis=1) + gap)
         reach.append(np.where(stop.any(axis=1), np.argmax(stop, axis=1), len(steps)))
-    half = 0.5 * (reach[0] + reach[1] + 1) * depth[pixels[:, 1], pixels[:, 0]] / focal
+    half = 0.5 * (reach[0] + reach[1] + 1) * start / focal
     half = half[np.isfinite(half) & (half > 0)]
     return float(np.median(half)) if len(half) else None
 
