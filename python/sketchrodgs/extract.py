@@ -734,7 +734,8 @@ def _radius_by_colour(
 ) -> float | None:
     """R of a part lying on a surface of another colour (`Trace.colours`), measured from the path:
     from each path pixel, walk both ways across the clean stroke until a pixel shows nothing, a
-    Gaussian nearer the surface's colour than the part's, or a depth over the depth gap (`radius`'s)
+    Gaussian nearer the surface's colour than the part's (in hue too: `_surface_coloured`), or a
+    depth over the depth gap (`radius`'s)
     beyond every depth walked (at most 1/8 of the image each way); R is the median half-width in
     world units. The depth ends a walk where the colour does not: a dark hook before a dark floor
     (docs/extraction.md, "A part lying on a surface", The path's widths stop at a depth step). The radius estimate walks from the stroke's samples, which
@@ -764,8 +765,8 @@ def _radius_by_colour(
         inside = (walk >= 0).all(axis=2) & (walk[..., 0] < width) & (walk[..., 1] < height)
         col, row = np.clip(walk[..., 0], 0, width - 1), np.clip(walk[..., 1], 0, height - 1)
         ids = index[row, col]
-        on_part = _part_coloured(scene.colors_of(np.maximum(ids, 0).ravel()), trace.colours).reshape(ids.shape)
-        stop = ~(inside & (ids >= 0) & (opacity[row, col] >= 0.5) & on_part)
+        on_surface = _surface_coloured(scene.colors_of(np.maximum(ids, 0).ravel()), trace.colours).reshape(ids.shape)
+        stop = ~(inside & (ids >= 0) & (opacity[row, col] >= 0.5)) | on_surface
         # each step against the depths walked before it (only those before the first stop count)
         z = depth[row, col]
         walked = np.concatenate([start[:, None], z[:, :-1]], axis=1)
@@ -912,6 +913,23 @@ def _of_the_part(ids: np.ndarray, scene: GaussianScene, colours: tuple | None) -
         return ids
     keep = _part_coloured(scene.colors_of(ids), colours)
     return ids[keep] if keep.sum() >= 2 else ids
+
+
+def _surface_coloured(rgb: np.ndarray, colours: tuple) -> np.ndarray:
+    """Per row of `rgb` (K, 3): whether it is nearer the surface's colour than the part's
+    (`Trace.colours`) both in RGB and in hue (each colour over the sum of its channels, 0.1 at
+    least, as `width::chroma` in Rust). A part's shaded side is darker, not of another hue: the
+    right cradle hook's in az300 lies nearer the dark floor's colour than its own lit grey
+    (docs/extraction.md, "A part lying on a surface", Up to a depth step)."""
+    part, surround = (np.asarray(c, np.float32) for c in colours)
+
+    def nearer_surround(values: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(values - a, axis=1) > np.linalg.norm(values - b, axis=1)
+
+    def chroma(c: np.ndarray) -> np.ndarray:
+        return c / np.maximum(c.sum(axis=-1, keepdims=True), 0.1)
+
+    return nearer_surround(rgb, part, surround) & nearer_surround(chroma(rgb), chroma(part), chroma(surround))
 
 
 def _part_coloured(rgb: np.ndarray, colours: tuple) -> np.ndarray:
