@@ -735,12 +735,12 @@ def _radius_by_colour(
     """R of a part lying on a surface of another colour (`Trace.colours`), measured from the path:
     from each path pixel, walk both ways across the clean stroke until a pixel shows nothing, a
     Gaussian nearer the surface's colour than the part's (in hue too: `_surface_coloured`), or a
-    depth over the depth gap (`radius`'s)
-    beyond every depth walked (at most 1/8 of the image each way); R is the median half-width in
-    world units. The depth ends a walk where the colour does not: a dark hook before a dark floor
-    (docs/extraction.md, "A part lying on a surface", The path's widths stop at a depth step). The radius estimate walks from the stroke's samples, which
-    a stroke drawn beside the part puts on the surface, and stops by a colour taken under the
-    stroke; the path keeps to the part (docs/extraction.md, "A part lying on a surface"). Only the
+    depth more than the depth gap (`radius`'s) beyond every depth walked (at most 1/8 of the image
+    each way); R is the median half-width in world units. The depth ends a walk where the colour
+    does not: a dark hook before a dark floor (docs/extraction.md, "A part lying on a surface", Up
+    to a depth step). The radius estimate walks from the stroke's samples, which a stroke drawn
+    beside the part puts on the surface, and stops by a colour taken under the stroke; the path
+    keeps to the part (docs/extraction.md, "A part lying on a surface"). Only the
     path pixels that show a Gaussian of the part's colour are measured from: a stroke drawn on past
     the part's end takes the path over the surface there, and each such pixel measured 0.5 px."""
     pixels = np.concatenate([p.pixels.astype(np.int64) for p in trace.pieces])
