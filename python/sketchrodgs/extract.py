@@ -921,15 +921,8 @@ def _surface_coloured(rgb: np.ndarray, colours: tuple) -> np.ndarray:
     least, as `width::chroma` in Rust). A part's shaded side is darker, not of another hue: the
     right cradle hook's in az300 lies nearer the dark floor's colour than its own lit grey
     (docs/extraction.md, "A part lying on a surface", Up to a depth step)."""
-    part, surround = (np.asarray(c, np.float32) for c in colours)
-
-    def nearer_surround(values: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.linalg.norm(values - a, axis=1) > np.linalg.norm(values - b, axis=1)
-
-    def chroma(c: np.ndarray) -> np.ndarray:
-        return c / np.maximum(c.sum(axis=-1, keepdims=True), 0.1)
-
-    return nearer_surround(rgb, part, surround) & nearer_surround(chroma(rgb), chroma(part), chroma(surround))
+    hue = [c / np.maximum(c.sum(axis=-1, keepdims=True), 0.1) for c in (rgb, *np.asarray(colours, np.float32))]
+    return ~_part_coloured(rgb, colours) & ~_part_coloured(hue[0], (hue[1], hue[2]))
 
 
 def _part_coloured(rgb: np.ndarray, colours: tuple) -> np.ndarray:
