@@ -10,6 +10,9 @@ Each pull is written to OUT_DIR/pull_<case>.png. OUT_DIR/pull_free_tip.png is th
 stem held at its base only, its tip free: before and after what continues the stem past the
 stroke rides with the tip (docs/deformation.md, "Continuations"). OUT_DIR/pull_rope_on_floor.png
 is a rope lifted off a floor of another colour: before and after the floor was left out of it.
+OUT_DIR/pull_large_leaf.png is the long side stem pulled in az090: before and after a leaf
+reaching past 20 R, with fewer Gaussians than the stem, rode along (docs/deformation.md,
+"Segmentation", Attached parts).
 """
 
 from __future__ import annotations
@@ -116,6 +119,28 @@ def rope_on_floor(out: Path) -> None:
     print(f"{out / 'pull_rope_on_floor.png'}: floor Gaussians bound {floor_before} before, {floor_now} now")
 
 
+def large_leaf(out: Path) -> None:
+    """The long side stem pulled in az090 (a rod of 42.6 R): with every attached part within 20 R,
+    as before, and now (its leaf reaching 20-21 R rides along)."""
+    scenes, cases = load_cases(CASES)
+    case = next(c for c in cases if c["name"] == "plant_side_stem_long")
+    scene = scenes[case["scene"]]
+    before = pull_case(scene, case, "az090", extract={"attach_size": segment.ATTACH_MAX * case["radius"]})
+    now = pull_case(scene, case, "az090")
+    box = crop_box(now, before)
+    attached = [int(r.extraction.binding.attached.sum()) for r in (before, now)]
+    side_by_side(
+        out / "pull_large_leaf.png",
+        box,
+        [
+            (render(now.rest, now.camera).rgb, "the long side stem at rest"),
+            (render(before.deformed, before.camera).rgb, f"pulled, before: {attached[0]:,} attached"),
+            (render(now.deformed, now.camera).rgb, f"now: {attached[1]:,} attached (its leaf)"),
+        ],
+    )
+    print(f"{out / 'pull_large_leaf.png'}: attached {attached[0]} before, {attached[1]} now")
+
+
 def side_by_side(path: Path, box: tuple[int, int, int, int], images: list[tuple[np.ndarray, str]]) -> None:
     """The crops `box` of `images` (RGB, with a caption each) side by side, written to `path`."""
     panels = []
@@ -166,6 +191,7 @@ def main() -> None:
         )
     free_tip(args.out)
     rope_on_floor(args.out)
+    large_leaf(args.out)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,13 @@ from sketchrodgs.extract import Extraction
 from sketchrodgs.polyline import polyline_length
 from sketchrodgs.rod import Rod
 from sketchrodgs.scene import GaussianScene
-from sketchrodgs.segment import DEFAULT_GROW, default_attach_size, part_and_attached, segment_and_bind
+from sketchrodgs.segment import (
+    DEFAULT_GROW,
+    default_attach_size,
+    default_attach_size_fewer,
+    part_and_attached,
+    segment_and_bind,
+)
 from sketchrodgs.skin import BoundRod, skin
 
 R = 0.01
@@ -113,13 +119,13 @@ def _teleported(rod: Rod, positions: np.ndarray) -> Rod:
     return rod
 
 
-def leaf_of_height(at_x: float, height: float, side: float = 1.0) -> np.ndarray:
+def leaf_of_height(at_x: float, height: float, side: float = 1.0, spacing: float = 0.002) -> np.ndarray:
     """A petiole from the tube's surface, then a blade 6 R across whose far edge lies `height` R
-    from the axis, on the tube's `side` (+1 above, -1 below)."""
+    from the axis, on the tube's `side` (+1 above, -1 below), its centres `spacing` apart."""
     y = lambda r: 0.05 + side * r * R  # noqa: E731
     stalk, top = sorted((y(0.8), y(height - 4))), sorted((y(height - 4), y(height)))
     petiole = grid((at_x - 0.001, stalk[0], -0.001), (at_x + 0.001, stalk[1], 0.001), 0.0015)
-    blade = grid((at_x - 3 * R, top[0], -0.001), (at_x + 3 * R, top[1], 0.001), 0.002)
+    blade = grid((at_x - 3 * R, top[0], -0.001), (at_x + 3 * R, top[1], 0.001), spacing)
     return np.concatenate([petiole, blade])
 
 
@@ -135,6 +141,24 @@ def test_a_short_strokes_leaves_ride_with_it_up_to_twelve_radii():
     ids = np.arange(len(scene))
     assert np.isin(ids[rows["leaf"]], binding.gaussian_ids).all()
     assert np.isin(ids[rows["large"]], binding.gaussian_ids).mean() < 0.2  # only its petiole's foot
+
+
+def test_a_leaf_past_twenty_radii_rides_along_unless_it_holds_more_than_the_part():
+    # a long stem's leaves reach 20-23 R from where they join; a pot under a main stem's base
+    # reaches as far, but holds more Gaussians than the stem (docs/deformation.md, "Segmentation")
+    length = polyline_length(AXIS)
+    assert (default_attach_size(length, R), default_attach_size_fewer(length, R)) == pytest.approx((20 * R, 25 * R))
+    leaf, dense = leaf_of_height(0.1, 22.0), leaf_of_height(-0.2, 23.0, side=-1.0, spacing=0.0005)
+    scene, rows = with_extras(leaf=leaf, dense=dense)
+    ids = np.arange(len(scene))
+    binding = segment_and_bind(AXIS, scene, R)
+    assert len(leaf) < (~binding.attached).sum() < len(dense)
+    assert np.isin(ids[rows["leaf"]], binding.gaussian_ids).all()
+    assert np.isin(ids[rows["leaf"]], binding.gaussian_ids[binding.attached]).mean() > 0.9
+    assert np.isin(ids[rows["dense"]], binding.gaussian_ids).mean() < 0.05  # only its petiole's foot
+    # a size given holds for every part
+    given = segment_and_bind(AXIS, scene, R, attach_size=20 * R)
+    assert np.isin(ids[rows["leaf"]], given.gaussian_ids).mean() < 0.2
 
 
 def test_attaching_can_be_turned_off_and_the_size_limit_holds():
@@ -218,6 +242,8 @@ def _clutter_rope() -> tuple[np.ndarray, GaussianScene]:
         ("leaf and body", {}),
         ("leaf and body", {"attach": False}),
         ("leaf and body", {"attach_size": 4 * R}),
+        ("leaf and body", {"attach_size": 4 * R, "attach_size_fewer": 9 * R}),
+        ("dense leaf", {"attach_size": 4 * R, "attach_size_fewer": 9 * R}),
         ("leaf near the end", {}),
         ("clutter rope", {}),
         ("clutter rope", {"grow": 1.5}),
@@ -233,6 +259,9 @@ def test_segmentation_matches_the_numpy_reference(case, options):
     elif case == "leaf and body":
         body = grid((-0.45, 0.05 - 12 * R, -0.001), (0.45, 0.05 - 0.9 * R, 0.001), 0.003)
         (scene, _), axis = with_extras(leaf=leaf_on_a_petiole(0.1), body=body), AXIS
+    elif case == "dense leaf":  # more centres than the part
+        dense = leaf_of_height(0.1, 8.0, spacing=0.0005)
+        (scene, _), axis = with_extras(dense=dense, leaf=leaf_of_height(-0.1, 8.0, side=-1.0)), AXIS
     elif case == "leaf near the end":
         (scene, _), axis = with_extras(leaf=leaf_on_a_petiole(0.44)), AXIS
     else:
@@ -245,6 +274,7 @@ def test_segmentation_matches_the_numpy_reference(case, options):
         R,
         grow=options.get("grow", DEFAULT_GROW),
         attach_size=size if options.get("attach", True) else None,
+        attach_size_fewer=options.get("attach_size_fewer"),
     )
     assert len(binding.gaussian_ids) > 100
     _same_binding(binding, reference(axis, scene.means, R, **options))

@@ -358,6 +358,7 @@ def segment_and_bind(
     attach_size: float | None,
     end_margin: float,
     colours: npt.NDArray[np.float32] | None = None,
+    attach_size_fewer: float | None = None,
 ) -> tuple[
     npt.NDArray[np.int64],
     npt.NDArray[np.int32],

@@ -288,8 +288,9 @@ def extract_rod(
         segment_scale: the part's cross-section reaches `segment_scale * R` from the axis (grown
             from the axis over neighbouring Gaussians; docs/deformation.md, "Segmentation").
         attach: small parts attached to the part (a leaf, a tag) ride rigidly with the rod.
-        attach_size: the largest attached part, in world units (default: a quarter of the rod's
-            length, at least 8 R).
+        attach_size: the largest attached part, in world units (default
+            `segment.default_attach_size`, and `segment.default_attach_size_fewer` for a part with
+            no more Gaussians than the rod's own; docs/deformation.md, "Segmentation").
         recentre: move the visible surface points onto the axis (our addition; the paper keeps them).
         render: a render of `scene` by `camera` with `index`, `index_depth` and `alpha` (made if
             None; without alpha, widths are measured on the index image alone).

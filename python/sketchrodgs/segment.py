@@ -9,8 +9,9 @@ distance are neighbours, so a gap in the cloud separates parts):
   another colour that the part lies on (a floor, a table) is left out where its centres form a
   sheet beside the axis;
 - attached parts: what hangs on the part and is small (every piece of it within `attach_size` of
-  where it joins; a leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the
-  rod point where it joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach
+  where it joins, or within `attach_size_fewer` where it holds no more Gaussians than the part; a
+  leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the rod point where it
+  joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach
   further and stay;
 - continuations: what continues the part past an end and fits within `continuation_size` of it
   (the tip of a stem with its leaves, past where the stroke stopped); each rides rigidly with that
@@ -54,6 +55,9 @@ ATTACH_SHARE = 0.5  # attached parts up to this share of the rod's length,
 # and between these many R: the bundled plant's leaves reach up to 10.3 R from where they join a
 # stem of 20 R, a tree's twigs 9-9.8 R from a branch of 15 R (docs/deformation.md)
 ATTACH_MIN, ATTACH_MAX = 12.0, 20.0
+# A part that holds no more Gaussians than the rod's own may reach this far: a long stem's leaves
+# reach 20-23 R; the pot under a main stem's base (21.5 R from where the stem enters) holds more.
+ATTACH_FEWER_MAX = 25.0
 CONTINUATION_SHARE = 1.0  # past an end, what fits within the rod's length continues it,
 CONTINUATION_MIN, CONTINUATION_MAX = 8.0, 20.0  # and between these many R
 CONTINUATION_LINKS = 2.0  # linked at twice the part's link: a leaf's big faint Gaussians sit further apart
@@ -79,6 +83,13 @@ def default_attach_size(length: float, radius: float) -> float:
     one's; the body a part joins is longer than the part; the cap keeps the search around a long
     rope small)."""
     return float(np.clip(ATTACH_SHARE * length, ATTACH_MIN * radius, ATTACH_MAX * radius))
+
+
+def default_attach_size_fewer(length: float, radius: float) -> float:
+    """Attached parts that hold no more Gaussians than the rod's own part reach up to half the
+    rod's length, between 12 R and 25 R: a leaf on a long stem (docs/deformation.md,
+    "Segmentation")."""
+    return float(np.clip(ATTACH_SHARE * length, ATTACH_MIN * radius, ATTACH_FEWER_MAX * radius))
 
 
 def default_continuation_size(length: float, radius: float) -> float:
@@ -152,23 +163,31 @@ def segment_and_bind(
         radius: R.
         grow: the part's cross-section reaches `grow * R` from the axis.
         attach: let small attached parts and strays ride with the rod.
-        attach_size: the largest attached part (default `default_attach_size`), and when given the
-            largest continuation past an end too (default `default_continuation_size`).
+        attach_size: the largest attached part (default `default_attach_size`, and
+            `default_attach_size_fewer` for one that holds no more Gaussians than the part), and when
+            given the largest continuation past an end too (default `default_continuation_size`).
     """
     polyline = np.ascontiguousarray(polyline, np.float64)
     length = polyline_length(polyline)
-    # a size given bounds what continues the part past its ends too
+    # a size given bounds what continues the part past its ends too, and every attached part
     continuation_size = default_continuation_size(length, radius) if attach_size is None else attach_size
+    attach_size_fewer = default_attach_size_fewer(length, radius) if attach_size is None else attach_size
     if attach_size is None:
         attach_size = default_attach_size(length, radius)
     # Every step below reads the centres within its own reach of the rod: cut the scene to all of
     # their reaches once (each step's own cut is then a pass over thousands, not millions).
-    rows = near_box(polyline, scene.means, _reach(radius, grow, attach_size, continuation_size))
+    rows = near_box(polyline, scene.means, _reach(radius, grow, attach_size_fewer, continuation_size))
     # np.take: NumPy gathers the rows of an (N, 3) array 4 times faster than `means[rows]` does
     # (0.08 against 0.35 ms for 26,000 rows; docs/extraction.md, "Speed")
     means, colours = _f32(np.take(scene.means, rows, axis=0)), scene.colors_of(rows)
     binding, surface = _part_and_attached(
-        polyline, means, radius, grow=grow, attach_size=attach_size if attach else None, colours=colours
+        polyline,
+        means,
+        radius,
+        grow=grow,
+        attach_size=attach_size if attach else None,
+        attach_size_fewer=attach_size_fewer,
+        colours=colours,
     )
     if attach:
         # a surface left out of the part does not continue it past an end either (a rope's tip
@@ -190,11 +209,20 @@ def _reach(radius: float, grow: float, attach_size: float, continuation_size: fl
 
 
 def part_and_attached(
-    polyline: np.ndarray, scene: GaussianScene, radius: float, *, grow: float, attach_size: float | None
+    polyline: np.ndarray,
+    scene: GaussianScene,
+    radius: float,
+    *,
+    grow: float,
+    attach_size: float | None,
+    attach_size_fewer: float | None = None,
 ) -> Binding:
-    """The part and its attached parts (None: none), in one Rust call, without the strays: the
-    step that `tests/reference/segment_reference.py` matches to the bit."""
-    return _part_and_attached(polyline, _f32(scene.means), radius, grow=grow, attach_size=attach_size)[0]
+    """The part and its attached parts (None: none; `attach_size_fewer` None: `attach_size`), in
+    one Rust call, without the strays: the step that `tests/reference/segment_reference.py`
+    matches to the bit."""
+    return _part_and_attached(
+        polyline, _f32(scene.means), radius, grow=grow, attach_size=attach_size, attach_size_fewer=attach_size_fewer
+    )[0]
 
 
 def _part_and_attached(
@@ -204,6 +232,7 @@ def _part_and_attached(
     *,
     grow: float,
     attach_size: float | None,
+    attach_size_fewer: float | None = None,
     colours: np.ndarray | None = None,
 ) -> tuple[Binding, tuple[np.ndarray, np.ndarray] | None]:
     """`part_and_attached` over the centres `means` (N, 3) float32 (ids index them); with their
@@ -225,6 +254,7 @@ def _part_and_attached(
         None if attach_size is None else float(attach_size),
         END_MARGIN,
         colours,
+        None if attach_size_fewer is None else float(attach_size_fewer),
     )
     colours_told = None if surface is None else (np.asarray(surface[0], np.float32), np.asarray(surface[1], np.float32))
     return Binding(ids, segment, t, offset, distance, attached), colours_told

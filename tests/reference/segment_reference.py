@@ -41,12 +41,15 @@ def segment_and_bind(
     grow: float = DEFAULT_GROW,
     attach: bool = True,
     attach_size: float | None = None,
+    attach_size_fewer: float | None = None,
 ) -> Binding:
-    """As `sketchrodgs.segment.segment_and_bind`, over centres `means` (N, 3) float32."""
+    """As `sketchrodgs.segment.part_and_attached`, over centres `means` (N, 3) float32 (the
+    sizes as it takes them; `attach_size` None: `default_attach_size`)."""
     polyline = np.asarray(polyline, np.float64)
     length = polyline_length(polyline)
     if attach_size is None:
         attach_size = default_attach_size(length, radius)
+    sizes = (attach_size, attach_size if attach_size_fewer is None else max(attach_size, attach_size_fewer))
     part_reach = grow * radius
     near_reach = part_reach + LINK_MAX * radius
     rows = near_box(polyline, means, near_reach)
@@ -64,7 +67,7 @@ def segment_and_bind(
     home = np.where(part, np.arange(len(rows)), -1)
     attached = np.zeros(len(rows), bool)
     if attach and touched:
-        reach = part_reach + attach_size + 2 * link
+        reach = part_reach + sizes[1] + 2 * link
         around = near_box(polyline, means, reach)
         around = around[~np.isin(around, rows)]
         seg_far, t_far, far = nearest_on_polyline(_f32(polyline), _f32(means[around]), reach)
@@ -81,7 +84,7 @@ def segment_and_bind(
         arc = arc_lengths(polyline)
         along = np.full(len(rows), np.nan)
         along[:count] = arc[segment] + t * (arc[segment + 1] - arc[segment])
-        attached_rows, contact = _attached_parts(points, link, part, distance, reach - link, attach_size)
+        attached_rows, contact = _attached_parts(points, link, part, distance, reach - link, sizes)
         attached_rows, contact = _not_from_a_neighbour(attached_rows, contact, along, end, length, END_MARGIN * radius)
         home[attached_rows] = contact
         attached[attached_rows] = True
@@ -102,7 +105,7 @@ def segment_and_bind(
 
 
 def _attached_parts(
-    points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float, size: float
+    points: np.ndarray, link: float, part: np.ndarray, distance: np.ndarray, shell: float, sizes: tuple[float, float]
 ) -> tuple[np.ndarray, np.ndarray]:
     others = np.flatnonzero(~part)
     if len(others) == 0 or not part.any():
@@ -119,7 +122,10 @@ def _attached_parts(
     contact = contact_of[label]
     members = small[label]
     spread = np.linalg.norm(points[others[members]] - points[contact[members]], axis=1)
-    small[np.unique(label[members][spread > size])] = False
+    small[np.unique(label[members][spread > sizes[1]])] = False
+    # past the first size, only a component with no more centres than the part
+    wide = np.unique(label[members][spread > sizes[0]])
+    small[wide] &= np.bincount(label, minlength=count)[wide] <= part.sum()
     chosen = small[label]
     return others[chosen], contact[chosen]
 

@@ -45,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive,
         metavar="SIZE",
         help="largest attached part that follows, in scene units (default: half the rod's length, "
-        "between 12 and 20 radii; past an end, the rod's length, between 8 and 20 radii)",
+        "between 12 and 20 radii, or 25 for a part with fewer Gaussians than the rod's own; past an "
+        "end, the rod's length, between 8 and 20 radii)",
     )
     parser.add_argument(
         "-o",

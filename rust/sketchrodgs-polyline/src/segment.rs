@@ -6,9 +6,10 @@
 //!   `grow * R` of it and within the rod's extent along it, less a surface of another colour the
 //!   part lies on (`surface_left_out`, where colours are given);
 //! - attached parts: components of the links among the other centres that touch the part and are
-//!   small (every piece within `attach_size` of where it joins, none within a link of the searched
-//!   region's edge). Each rides with the part centre it joins at; within `end_margin * R` of a rod
-//!   end only what lies past that end is attached.
+//!   small (every piece within `attach_size` of where it joins, or within `attach_size_fewer` where
+//!   it holds no more centres than the part, none within a link of the searched region's edge).
+//!   Each rides with the part centre it joins at; within `end_margin * R` of a rod end only what
+//!   lies past that end is attached.
 //!
 //! Every decision is the one of the NumPy implementation this replaced (kept as the test oracle,
 //! `tests/reference/segment_reference.py`), to the bit: a `f32` distance is compared with a radius
@@ -36,6 +37,9 @@ pub struct SegmentParams {
     pub link_max: f64,
     /// The largest attached part; `None`: nothing is attached.
     pub attach_size: Option<f64>,
+    /// The largest attached part that holds no more centres than the part itself (a leaf on its
+    /// stem; a pot under a stem's base holds more): `None` or less than `attach_size`, that.
+    pub attach_size_fewer: Option<f64>,
     /// Within this many radii of a rod end, only what lies past the end is attached.
     pub end_margin: f64,
 }
@@ -219,6 +223,9 @@ pub fn segment_and_bind(
     if let Some(size) = params.attach_size {
         checked("attach_size", size, Bound::NotNegative)?;
     }
+    if let Some(size) = params.attach_size_fewer {
+        checked("attach_size_fewer", size, Bound::NotNegative)?;
+    }
     if let Some(colours) = colours
         && colours.len() != means.len()
     {
@@ -258,12 +265,13 @@ pub fn segment_and_bind(
     let mut attached = vec![false; near.rows.len()];
     let mut around = Centres::default();
     if let (Some(attach_size), true) = (params.attach_size, part.touched) {
+        let sizes = (attach_size, params.attach_size_fewer.map_or(attach_size, |s| s.max(attach_size)));
         let link = f64::from(part.link);
         // what a part can reach from where it joins, plus two links (a larger body shows itself
         // by coming within a link of the edge)
-        let reach = part_reach + attach_size + 2.0 * link;
+        let reach = part_reach + sizes.1 + 2.0 * link;
         around = rod.within(reach, &near.rows, true)?;
-        let joined = attached_parts(&near, &around, &part, &in_part, part_reach, reach, attach_size)?;
+        let joined = attached_parts(&near, &around, &part, &in_part, part_reach, reach, sizes)?;
         let ends = |row: usize| match row.checked_sub(near.rows.len()) {
             None => which_end(&near.nearest[row], vertices),
             Some(a) => which_end(&around.nearest[a], vertices),
@@ -363,8 +371,9 @@ impl Rod<'_> {
 ///
 /// A part is a component of the links among the other rows (not the part's). It is small when
 /// it touches the part, none of it comes within a link of the searched region's edge (`reach`
-/// less a link from the axis; a large body runs on past it), and it fits in a ball of
-/// `attach_size` around where it joins: the contact of its first row that has one.
+/// less a link from the axis; a large body runs on past it), and it fits in a ball around where
+/// it joins (the contact of its first row that has one): of `sizes.0`, or of `sizes.1` (the
+/// larger) where it holds no more rows than the part.
 ///
 /// Only the components that touch the part matter, so they are searched outward from their
 /// touching rows, lowest first (the first search in a component starts at its first touching
@@ -378,7 +387,7 @@ fn attached_parts(
     in_part: &[bool],
     part_reach: f64,
     reach: f64,
-    attach_size: f64,
+    sizes: (f64, f64),
 ) -> Result<Vec<(usize, u32)>, ProximityError> {
     // the other rows: near rows not in the part, then the around rows (all of them)
     let others: Vec<usize> = (0..near.rows.len())
@@ -407,16 +416,21 @@ fn attached_parts(
         .collect();
     // a row makes its component large: past the shell, or farther from the contact than the
     // size (the spread as NumPy's norm in float32 measures it: ((x^2 + y^2) + z^2), rooted)
-    let (shell, size) = ((reach - f64::from(part.link)) as f32, attach_size as f32);
-    let too_far = |o: usize, contact: u32| {
+    let shell = (reach - f64::from(part.link)) as f32;
+    let (size, size_fewer) = (sizes.0 as f32, sizes.1 as f32);
+    let spread = |o: usize, contact: u32| {
         let (p, q) = (points[o], near.points[contact as usize]);
         let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-        distance[o] > shell || (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() > size
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
     };
+    let too_far = |o: usize, contact: u32| distance[o] > shell || spread(o, contact) > size_fewer;
+    let part_rows = in_part.iter().filter(|&&p| p).count();
     let mut components = proximity::Components::new(&points, part.link)?;
     let (mut joined, mut component) = (Vec::new(), Vec::new());
     for (start, contact) in touching {
-        if components.search(start, |o| too_far(o, contact), &mut component) == Some(false) {
+        if components.search(start, |o| too_far(o, contact), &mut component) == Some(false)
+            && (component.len() <= part_rows || component.iter().all(|&o| spread(o, contact) <= size))
+        {
             joined.extend(component.iter().map(|&o| (others[o], contact)));
         }
     }
@@ -521,6 +535,7 @@ mod tests {
             link_min: 0.2,
             link_max: 0.75,
             attach_size: Some(8.0 * R),
+            attach_size_fewer: None,
             end_margin: 3.0,
         }
     }
@@ -576,6 +591,26 @@ mod tests {
     }
 
     #[test]
+    fn a_part_past_the_size_rides_along_only_when_it_holds_no_more_centres_than_the_part() {
+        // the blob reaches past 1 R from where its stalk leaves the part, within 8 R
+        let (polyline, arc, mut means) = scene();
+        let blob_row = 201 * 12 + 40;
+        let sizes = SegmentParams { attach_size: Some(R), attach_size_fewer: Some(8.0 * R), ..params() };
+        let blob_rides = |means: &[[f32; 3]], params: &SegmentParams| {
+            let binding = segment_and_bind(&polyline, &arc, 1.0, means, None, params).unwrap();
+            binding.rows.binary_search(&blob_row).is_ok_and(|b| binding.attached[b])
+        };
+        assert!(blob_rides(&means, &sizes));
+        assert!(!blob_rides(&means, &SegmentParams { attach_size_fewer: None, ..sizes.clone() }));
+        // the blob made denser than the tube (2,500 centres more where it lies): it stays
+        for k in 0..2500 {
+            means.push([0.49 + (k % 50) as f32 * 0.0004, 0.2 + (k / 50) as f32 * 0.0004, 0.0]);
+        }
+        assert!(!blob_rides(&means, &sizes));
+        assert!(blob_rides(&means, &SegmentParams { attach_size: Some(8.0 * R), ..sizes }));
+    }
+
+    #[test]
     fn bad_input_is_an_error() {
         let (polyline, arc, means) = scene();
         let bad = |polyline: &[[f64; 3]], arc: &[f64], params: SegmentParams| {
@@ -589,6 +624,8 @@ mod tests {
         assert!(bad(&polyline, &arc, SegmentParams { radius: 0.0, ..params() }).contains("radius must be"));
         assert!(bad(&polyline, &arc, SegmentParams { grow: f64::NAN, ..params() }).contains("grow must be"));
         assert!(bad(&polyline, &arc, SegmentParams { link_min: 0.0, ..params() }).contains("link must be"));
+        let fewer = SegmentParams { attach_size_fewer: Some(f64::NAN), ..params() };
+        assert!(bad(&polyline, &arc, fewer).contains("attach_size_fewer must be finite"));
         let far = vec![[1e30_f32, 0.0, 0.0]];
         assert!(segment_and_bind(&polyline, &arc, 1.0, &far, None, &params()).unwrap().rows.is_empty());
         let short = vec![[0.5_f32; 3]; means.len() - 1];

@@ -144,11 +144,12 @@ type BindingArrays<'py> = (
 /// The Gaussians of `means` (N, 3) float32 that follow the rod on `polyline` (M, 3) float64, bound
 /// (`sketchrodgs_polyline::segment`): `arc` (M,) float64 arc lengths at the vertices, `length` the
 /// rod's length, `radius` R; `grow`, `link_min`, `link_max` and `end_margin` in radii;
-/// `attach_size` None attaches nothing. With `colours` (N, 3) float32, a surface of another colour
+/// `attach_size` None attaches nothing, `attach_size_fewer` (None: `attach_size`) the largest
+/// attached part that holds no more centres than the part. With `colours` (N, 3) float32, a surface of another colour
 /// under the part is left out of it; the last entry is then (the part's colour, the surface's),
 /// else None.
 #[pyfunction]
-#[pyo3(signature = (polyline, arc, length, means, radius, grow, link_spacings, link_min, link_max, attach_size, end_margin, colours=None))]
+#[pyo3(signature = (polyline, arc, length, means, radius, grow, link_spacings, link_min, link_max, attach_size, end_margin, colours=None, attach_size_fewer=None))]
 #[allow(clippy::too_many_arguments)]
 fn segment_and_bind<'py>(
     py: Python<'py>,
@@ -164,6 +165,7 @@ fn segment_and_bind<'py>(
     attach_size: Option<f64>,
     end_margin: f64,
     colours: Option<&Bound<'py, PyArray2<f32>>>,
+    attach_size_fewer: Option<f64>,
 ) -> PyResult<BindingArrays<'py>> {
     let (polyline, arc, means) = (polyline.try_readonly()?, arc.try_readonly()?, means.try_readonly()?);
     check_shape("polyline", polyline.shape(), &[None, Some(3)])?;
@@ -177,7 +179,8 @@ fn segment_and_bind<'py>(
     let arc = contiguous(&arc, "arc")?;
     let means: &[[f32; 3]] = as_rows(contiguous(&means, "means")?);
     let colours: Option<&[[f32; 3]]> = colours.as_ref().map(|c| contiguous(c, "colours")).transpose()?.map(as_rows);
-    let params = SegmentParams { radius, grow, link_spacings, link_min, link_max, attach_size, end_margin };
+    let params =
+        SegmentParams { radius, grow, link_spacings, link_min, link_max, attach_size, attach_size_fewer, end_margin };
     let binding = run_parallel(py, "segment_and_bind", || {
         segment::segment_and_bind(polyline, arc, length, means, colours, &params)
     })?
