@@ -271,6 +271,18 @@ def _case_view(group: str, name: str, view_name: str):
     )
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_a_stroke_sample_far_off_the_image_makes_no_nan():
+    """A stray sample near float32's largest (a glitch of the input device) in the long side stem's
+    az090 stroke: the stroke's line to it crosses the image, and the rod found is finite; no sum
+    overflows into NaN on the way (the check that the rod runs along the stroke did, and then
+    passed whatever the angle)."""
+    scene, case, camera, stroke = _case_view("cases", "plant_side_stem_long", "az090")
+    stroke[1, 0] += 3e38
+    rod = extract_rod(scene, camera, stroke, radius=case["radius"])
+    assert np.isfinite(rod.polyline).all() and len(rod.polyline) >= 2
+
+
 def test_a_sprinkle_under_a_faint_far_off_gaussian_gets_its_rod_along_the_stroke():
     """Over sprinkle_15 in az270, a faint icing Gaussian 13 R long owns most of the path's pixels
     (the largest weight there, though the pixels show the sprinkle's blue) and its centre lies 400

@@ -545,6 +545,12 @@ def _turn_from_stroke(camera: Camera, polyline: np.ndarray, stroke: np.ndarray, 
     radius_px = radius * camera.fx / max(float(np.mean(depth)), 1e-12)
     if not np.linalg.norm(chord) >= 2 * radius_px:
         return 0.0
+    # the stroke's points in the image (one far off it, a stray sample the clean-up dropped, would
+    # make the nearest-point sums overflow in float32)
+    stroke = np.asarray(stroke, np.float64)
+    stroke = stroke[((stroke >= 0) & (stroke <= (camera.width, camera.height))).all(axis=1)]
+    if len(stroke) < 2:
+        return 0.0
     _, at = pl.nearest_on_polyline(ends, stroke)
     over = pl.point_at(stroke, pl.arc_lengths(stroke), at)
     along = over[1] - over[0]
