@@ -4,6 +4,7 @@ across a gap; small attached parts ride with the rod, large bodies stay; the rod
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -159,6 +160,30 @@ def test_a_leaf_past_twenty_radii_rides_along_unless_it_holds_more_than_the_part
     # a size given holds for every part
     given = segment_and_bind(AXIS, scene, R, attach_size=20 * R)
     assert np.isin(ids[rows["leaf"]], given.gaussian_ids).mean() < 0.2
+
+
+def test_a_leafs_faint_haze_rides_with_it_but_an_opaque_sheet_as_close_stays():
+    # a capture blurs a leaf with large faint Gaussians 1-2 R off its surface, linked to each other
+    # and not to the leaf; left behind, they hung where the leaf had been, a faint copy of it. An
+    # opaque sheet of small Gaussians as close on the other side is something the leaf touches.
+    blade = lambda z: grid((0.1 - 3 * R, 0.05 + 5 * R, z), (0.1 + 3 * R, 0.05 + 8 * R, z), 0.0025)  # noqa: E731
+    scene, rows = with_extras(leaf=leaf_on_a_petiole(0.1), haze=blade(0.009), sheet=blade(-0.009))
+    opacities, scales = scene.opacities.copy(), scene.scales.copy()
+    opacities[rows["haze"]], scales[rows["haze"]] = 0.2, 1.3 * R
+    scene = replace(scene, opacities=opacities, scales=scales)
+    binding = segment_and_bind(AXIS, scene, R)
+    ids = np.arange(len(scene))
+    attached = binding.gaussian_ids[binding.attached]
+    assert np.isin(ids[rows["leaf"]], binding.gaussian_ids).all()
+    assert np.isin(ids[rows["haze"]], attached).all()
+    assert not np.isin(ids[rows["sheet"]], binding.gaussian_ids).any()
+    # each haze Gaussian rides with the leaf: at the (segment, t) where the leaf joins
+    haze = np.isin(binding.gaussian_ids, ids[rows["haze"]])
+    leaf = np.isin(binding.gaussian_ids, ids[rows["leaf"]]) & binding.attached
+    assert set(zip(binding.segment[haze], binding.t[haze])) <= set(zip(binding.segment[leaf], binding.t[leaf]))
+    # faint but small (a speckle of the leaf's own size): not haze
+    small = replace(scene, scales=np.where(np.isin(ids, ids[rows["haze"]])[:, None], 0.2 * R, scales))
+    assert not np.isin(ids[rows["haze"]], segment_and_bind(AXIS, small, R).gaussian_ids).any()
 
 
 def test_attaching_can_be_turned_off_and_the_size_limit_holds():

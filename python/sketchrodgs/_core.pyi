@@ -96,6 +96,9 @@ def median_neighbour_distance(points: npt.NDArray[np.float32], k: int, samples: 
 def small_clusters(
     points: npt.NDArray[np.float32], link: float, seeds: npt.NDArray[np.int64], size: float
 ) -> npt.NDArray[np.bool_]: ...
+def clusters_inside(
+    points: npt.NDArray[np.float32], link: float, seeds: npt.NDArray[np.int64], inside: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.int64]: ...
 def detours(
     points: npt.NDArray[np.float64],
     uv: npt.NDArray[np.float64],

@@ -38,6 +38,8 @@ pub enum ProximityError {
     TooManyCells(usize),
     #[error("seed {seed} is not one of the {points} points")]
     SeedOutOfRange { seed: usize, points: usize },
+    #[error("{flags} inside flags for {points} points")]
+    InsideCount { flags: usize, points: usize },
 }
 
 /// The cell of `p` in a grid of `width`-wide cells: `floor(c / width)` per coordinate (without a
@@ -580,6 +582,37 @@ pub fn small_clusters(points: &[[f32; 3]], link: f32, seeds: &[usize], size: f64
     Ok(small)
 }
 
+/// Per point, the cluster it lies in, numbered from 0, where that cluster lies within a shell: a
+/// component of the points linked within `link` that holds one of the `seeds` and all of whose
+/// points are `inside`; `None` elsewhere. Each search stops at the first point outside, whose
+/// component runs on past the shell. Segmentation's haze of attached parts (docs/deformation.md,
+/// "Segmentation"; `segment._with_haze`).
+pub fn clusters_inside(
+    points: &[[f32; 3]],
+    link: f32,
+    seeds: &[usize],
+    inside: &[bool],
+) -> Result<Vec<Option<u32>>, ProximityError> {
+    if let Some(&seed) = seeds.iter().find(|&&seed| seed >= points.len()) {
+        return Err(ProximityError::SeedOutOfRange { seed, points: points.len() });
+    }
+    if inside.len() != points.len() {
+        return Err(ProximityError::InsideCount { flags: inside.len(), points: points.len() });
+    }
+    let mut cluster = vec![None; points.len()];
+    let mut components = Components::new(points, link)?;
+    let (mut component, mut count) = (Vec::new(), 0);
+    for &seed in seeds {
+        if components.search(seed, |i| !inside[i], &mut component) == Some(false) {
+            for &i in &component {
+                cluster[i] = Some(count);
+            }
+            count += 1;
+        }
+    }
+    Ok(cluster)
+}
+
 /// Point kinds for [`grow`].
 pub const SEED: u8 = 0;
 pub const ELIGIBLE: u8 = 1;
@@ -991,6 +1024,41 @@ mod tests {
         assert_eq!(
             small_clusters(&points, link, &[600], size),
             Err(ProximityError::SeedOutOfRange { seed: 600, points: 600 })
+        );
+    }
+
+    #[test]
+    fn clusters_inside_are_the_seeded_components_wholly_inside() {
+        // clusters of a random cloud (link 0.05) inside a ball of 0.35 around the middle, seeded
+        // at every third point: each point's answer is that of its whole component
+        let points = cloud(600, 11);
+        let link = 0.05;
+        let inside: Vec<bool> =
+            points.iter().map(|p| p.iter().map(|c| (c - 0.5) * (c - 0.5)).sum::<f32>() < 0.35 * 0.35).collect();
+        let seeds: Vec<usize> = (0..600).step_by(3).collect();
+        let cluster = clusters_inside(&points, link, &seeds, &inside).unwrap();
+        let labels = components(&points, link);
+        let count = *labels.iter().max().unwrap() as usize + 1;
+        let (mut seeded, mut outside) = (vec![false; count], vec![false; count]);
+        for (i, &l) in labels.iter().enumerate() {
+            seeded[l as usize] |= i % 3 == 0;
+            outside[l as usize] |= !inside[i];
+        }
+        for (i, &l) in labels.iter().enumerate() {
+            assert_eq!(cluster[i].is_some(), seeded[l as usize] && !outside[l as usize], "point {i}");
+        }
+        // one number per component: two points share a number exactly when they share a component
+        for i in (0..600).step_by(7) {
+            for j in (0..600).step_by(5) {
+                if let (Some(a), Some(b)) = (cluster[i], cluster[j]) {
+                    assert_eq!(a == b, labels[i] == labels[j]);
+                }
+            }
+        }
+        assert!(cluster.iter().any(Option::is_some) && cluster.iter().zip(&inside).any(|(c, &i)| c.is_none() && i));
+        assert_eq!(
+            clusters_inside(&points, link, &seeds, &inside[1..]),
+            Err(ProximityError::InsideCount { flags: 599, points: 600 })
         );
     }
 

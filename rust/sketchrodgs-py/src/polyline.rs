@@ -1,7 +1,7 @@
 //! Bindings for `sketchrodgs-polyline`: `_core.nearest_on_polyline(...)`, `_core.cross_section_centroids(...)`,
 //! `_core.crowding(...)`,
 //! `_core.segment_and_bind(...)`, `_core.rows_in_box(...)`, `_core.continuation(...)`,
-//! `_core.detours(...)`, `_core.median_neighbour_distance(...)`, `_core.small_clusters(...)`.
+//! `_core.detours(...)`, `_core.median_neighbour_distance(...)`, `_core.small_clusters(...)`, `_core.clusters_inside(...)`.
 
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -285,6 +285,28 @@ fn small_clusters<'py>(
     Ok(small.into_pyarray(py))
 }
 
+/// Per point of `points` (N, 3) float32, the number of the cluster of points linked within `link`
+/// that holds one of `seeds` (K,) int64 and lies wholly `inside` (N,) bool, or -1
+/// (`sketchrodgs_polyline::proximity::clusters_inside`). Returns (N,) int64.
+#[pyfunction]
+fn clusters_inside<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyArray2<f32>>,
+    link: f32,
+    seeds: &Bound<'py, PyArray1<i64>>,
+    inside: &Bound<'py, PyArray1<bool>>,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (points, seeds, inside) = (points.try_readonly()?, seeds.try_readonly()?, inside.try_readonly()?);
+    check_shape("points", points.shape(), &[None, Some(3)])?;
+    check_shape("inside", inside.shape(), &[Some(points.shape()[0])])?;
+    let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
+    let seeds: Vec<usize> = seed_rows(contiguous(&seeds, "seeds")?, points.len())?;
+    let inside = contiguous(&inside, "inside")?;
+    let cluster = run_parallel(py, "clusters_inside", || proximity::clusters_inside(points, link, &seeds, inside))?
+        .map_err(|err| SketchRodGSError::new_err(format!("clusters_inside: {err}")))?;
+    Ok(cluster.into_iter().map(|c| c.map_or(-1, i64::from)).collect::<Vec<i64>>().into_pyarray(py))
+}
+
 /// The detours of the axis `points` (M, 3) float64 seen at `uv` (M, 2) float64 with `radius_px`
 /// (M,) float64 (`sketchrodgs_polyline::detours::detours`; the limits in radii, `back_ratio` a
 /// ratio): (K, 2) int64, each row the first and last point of a stretch to put onto its chord.
@@ -382,5 +404,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(bumps, m)?)?;
     m.add_function(wrap_pyfunction!(median_neighbour_distance, m)?)?;
     m.add_function(wrap_pyfunction!(small_clusters, m)?)?;
+    m.add_function(wrap_pyfunction!(clusters_inside, m)?)?;
     Ok(())
 }
