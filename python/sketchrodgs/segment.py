@@ -11,8 +11,7 @@ distance are neighbours, so a gap in the cloud separates parts):
 - attached parts: what hangs on the part and is small (every piece of it within `attach_size` of
   where it joins, or within `attach_size_fewer` where it holds no more Gaussians than the part; a
   leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the rod point where it
-  joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach
-  further and stay;
+  joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach further and stay;
 - continuations: what continues the part past an end and fits within `continuation_size` of it
   (the tip of a stem with its leaves, past where the stroke stopped); each rides rigidly with that
   end. A clamped end does not move, so they move only with a free end (`Animation(clamp=...)`);
