@@ -186,6 +186,25 @@ def test_a_leafs_faint_haze_rides_with_it_but_an_opaque_sheet_as_close_stays():
     assert not np.isin(ids[rows["haze"]], segment_and_bind(AXIS, small, R).gaussian_ids).any()
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_the_haze_search_keeps_every_centre_within_reach_of_the_attached_ones():
+    from scipy.spatial import cKDTree
+
+    from sketchrodgs.segment import _in_cells_around
+
+    rng = np.random.default_rng(5)
+    attached = (rng.uniform(0, 1, (2000, 3)) * [1, 0.2, 0.2]).astype(np.float32)
+    centres = rng.uniform(-0.2, 1.2, (20000, 3)).astype(np.float32)
+    for reach in (0.01, 0.05, 0.3):
+        kept = _in_cells_around(centres, attached, reach)
+        within = cKDTree(attached).query(centres)[0] <= reach
+        assert kept[within].all() and kept.sum() < 2 * within.sum() + 200
+    # attached centres spread over 10^10 reaches: cells grow rather than keys overflow
+    far = np.array([[0, 0, 0], [1e7, 1e7, 1e7]], np.float32)
+    near_each = np.array([[5e-4, 0, 0], [5e6, 5e6, 5e6], [1e7, 1e7, 1e7 + 5e-4]], np.float32)
+    assert _in_cells_around(near_each, far, 1e-3).tolist() == [True, False, True]
+
+
 def test_attaching_can_be_turned_off_and_the_size_limit_holds():
     scene, rows = with_extras(leaf=leaf_on_a_petiole(0.1))
     leaf_rows = np.arange(len(scene))[rows["leaf"]]

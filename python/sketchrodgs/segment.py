@@ -421,14 +421,17 @@ def _in_cells_around(centres: np.ndarray, points: np.ndarray, reach: float) -> n
     of `points` (M, 3) or touches one that does: every centre within `reach` of a point among them,
     and few others (a cheap filter before the exact distances: a k-d tree query of 33,000 centres
     around the main stem's 11,500 attached Gaussians took 22 ms, 1,640 of them within reach)."""
-    cell = np.floor(np.asarray(points, np.float64) / reach).astype(np.int64)
+    points = np.asarray(points, np.float64)
+    # cells at least `reach` wide, and at most 2^20 along any axis, so that a key fits in 63 bits
+    width = max(reach, float(np.ptp(points, axis=0).max()) / 2**20)
+    cell = np.floor(points / width).astype(np.int64)
     base = cell.min(axis=0) - 1  # a cell of margin on every side: a neighbour's key never wraps
     size = cell.max(axis=0) - base + 2
     stride = np.array([size[1] * size[2], size[2], 1])
     steps = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) @ stride
     occupied = np.unique((cell - base) @ stride)
     around = np.unique(occupied[:, None] + steps[None])
-    at = np.floor(np.asarray(centres, np.float64) / reach).astype(np.int64) - base
+    at = np.floor(np.asarray(centres, np.float64) / width).astype(np.int64) - base
     inside = ((at >= 0) & (at < size)).all(axis=1)
     found = np.zeros(len(centres), bool)
     found[inside] = np.isin(at[inside] @ stride, around)
