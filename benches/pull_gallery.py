@@ -119,10 +119,10 @@ def rope_on_floor(out: Path) -> None:
     print(f"{out / 'pull_rope_on_floor.png'}: floor Gaussians bound {floor_before} before, {floor_now} now")
 
 
-def large_leaf(out: Path) -> None:
-    """The long side stem pulled in az090 (a rod of 42.6 R): with every attached part within 20 R,
-    as before, and now (its leaf reaching 20-21 R rides along)."""
-    scenes, cases = load_cases(CASES)
+def large_leaf(out: Path, scenes: dict, cases: list[dict]) -> None:
+    """The long side stem pulled in az090 (a rod of 42.6 R, of `load_cases(CASES)`'s `scenes` and
+    `cases`): with every attached part within 20 R, as before, and now (its leaf reaching 20-21 R
+    rides along)."""
     case = next(c for c in cases if c["name"] == "plant_side_stem_long")
     scene = scenes[case["scene"]]
     before = pull_case(scene, case, "az090", extract={"attach_size": segment.ATTACH_MAX * case["radius"]})
@@ -191,7 +191,7 @@ def main() -> None:
         )
     free_tip(args.out)
     rope_on_floor(args.out)
-    large_leaf(args.out)
+    large_leaf(args.out, scenes, cases)
 
 
 if __name__ == "__main__":

@@ -381,22 +381,24 @@ def _with_haze(
     taken = np.zeros(len(means), bool)
     taken[binding.gaussian_ids] = True
     near = near[~taken[near]]
-    near = near[_in_cells_around(np.take(means, near, axis=0), points32, shell + link)]
+    centres = np.take(means, near, axis=0)
+    kept = _in_cells_around(centres, points32, shell + link)
+    near, centres = near[kept], centres[kept]
     if len(near) == 0:
         return binding
     to_attached, nearest = cKDTree(points32.astype(np.float64)).query(
-        np.take(means, near, axis=0).astype(np.float64), distance_upper_bound=shell + link
+        centres.astype(np.float64), distance_upper_bound=shell + link
     )
     within = np.isfinite(to_attached)
-    near, to_attached, nearest = near[within], to_attached[within], nearest[within]
+    near, centres, to_attached, nearest = near[within], centres[within], to_attached[within], nearest[within]
     seeds = np.flatnonzero(to_attached <= STRAY_REACH * radius)
     if len(seeds) == 0:
         return binding
-    cluster = _core.clusters_inside(np.take(means, near, axis=0), link, seeds, to_attached <= shell)
+    cluster = _core.clusters_inside(centres, link, seeds, to_attached <= shell)
     found = cluster >= 0
     if not found.any():
         return binding
-    near, nearest, cluster = near[found], nearest[found], cluster[found]
+    near, centres, nearest, cluster = near[found], centres[found], nearest[found], cluster[found]
     # faint and large: the cluster's mean opacity, and the share of its Gaussians larger than R
     scene_rows = rows[near]
     opacity = np.take(scene.opacities, scene_rows).astype(np.float64)
@@ -408,7 +410,7 @@ def _with_haze(
     if not goes.any():
         return binding
     haze, joined = near[goes], np.flatnonzero(binding.attached)[nearest[goes]]
-    centre = np.take(means, haze, axis=0).astype(np.float64)
+    centre = centres[goes].astype(np.float64)
     farthest = float(binding.distance.max()) + shell + link
     _, _, distance = _core.nearest_on_polyline(_f32(polyline), _f32(centre), farthest)
     return binding.extend(
