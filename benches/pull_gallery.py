@@ -12,7 +12,9 @@ stroke rides with the tip (docs/deformation.md, "Continuations"). OUT_DIR/pull_r
 is a rope lifted off a floor of another colour: before and after the floor was left out of it.
 OUT_DIR/pull_large_leaf.png is the long side stem pulled in az090: before and after a leaf
 reaching past 20 R, with fewer Gaussians than the stem, rode along (docs/deformation.md,
-"Segmentation", Attached parts).
+"Segmentation", Attached parts). OUT_DIR/pull_split_bands.png is the second held-out sprinkle pulled
+in az135, at three times the resolution: its needles split into one piece an edge, as before, and
+into two (docs/deformation.md, "Subdivision", Why two pieces an edge).
 """
 
 from __future__ import annotations
@@ -24,12 +26,14 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from sketchrodgs import data, extract_rod, load_scene, render, segment, synthetic
+from sketchrodgs import subdivide as sd
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.images import save_png, to_uint8
 from sketchrodgs.realcases import load_cases
 from sketchrodgs.realpulls import PULLS, PullResult, pull_case
 
 CASES = Path(__file__).parent.parent / "tests" / "data" / "real_cases" / "cases.json"
+HELDOUT2 = CASES.with_name("heldout2_cases.json")
 MARGIN_PX = 50
 WIDTH = 420  # of each panel
 
@@ -141,6 +145,38 @@ def large_leaf(out: Path, scenes: dict, cases: list[dict]) -> None:
     print(f"{out / 'pull_large_leaf.png'}: attached {attached[0]} before, {attached[1]} now")
 
 
+def split_bands(out: Path) -> None:
+    """The second held-out sprinkle in az135 at rest and pulled, its needles split as before (one
+    piece an edge, each at most 1.5/k of the parent's deviation; its table fitted here) and now."""
+    scenes, cases = load_cases(HELDOUT2)
+    case = next(c for c in cases if c["name"] == "donut_sprinkle_e")
+    scene = scenes[case["scene"]]
+    now = pull_case(scene, case, "az135")
+    constants = (sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MAX_PIECES, sd.piece_table)
+    fitted: dict[int, tuple] = {}
+    try:
+        sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MAX_PIECES = 1.5, 1.0, 1.0, 16
+        sd.piece_table = lambda k: fitted.setdefault(k, sd.fit_piece_table(k))
+        before = pull_case(scene, case, "az135")
+    finally:
+        sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MAX_PIECES, sd.piece_table = constants
+    zoom = 3
+    camera = now.camera.resized(now.camera.width * zoom)
+    box = tuple(zoom * v for v in crop_box(now, before))
+    side_by_side(
+        out / "pull_split_bands.png",
+        box,
+        [
+            (render(before.rest, camera).rgb, "at rest, one piece an edge"),
+            (render(before.deformed, camera).rgb, "pulled: bands"),
+            (render(now.rest, camera).rgb, "at rest, two pieces an edge (now)"),
+            (render(now.deformed, camera).rgb, "pulled, now"),
+        ],
+    )
+    added = [len(r.rest) - len(scene) for r in (before, now)]
+    print(f"{out / 'pull_split_bands.png'}: pieces added {added[0]} before, {added[1]} now")
+
+
 def side_by_side(path: Path, box: tuple[int, int, int, int], images: list[tuple[np.ndarray, str]]) -> None:
     """The crops `box` of `images` (RGB, with a caption each) side by side, written to `path`."""
     panels = []
@@ -192,6 +228,7 @@ def main() -> None:
     free_tip(args.out)
     rope_on_floor(args.out)
     large_leaf(args.out, scenes, cases)
+    split_bands(args.out)
 
 
 if __name__ == "__main__":

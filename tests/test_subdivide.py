@@ -19,15 +19,30 @@ from sketchrodgs.scene import GaussianScene
 CASES = Path(__file__).parent / "data" / "real_cases" / "cases.json"
 
 
-@pytest.mark.parametrize("k", [2, 3, 5, 8, 16])
+@pytest.mark.parametrize("k", [2, 3, 5, 8, 16, 31, 32])
 def test_the_shipped_piece_tables_composite_to_the_parent(k):
     spacing, std, opacity = sd.piece_table(k)
     target = np.exp(-0.5 * sd._ALONG**2)[None] * sd._ACROSS[:, None]
     for o, d, s, pieces in zip(sd._OPACITY_GRID, spacing, std, opacity):
         error = sd._composite(d, s, pieces) - o * target
-        assert np.sqrt(np.mean(error**2)) < 0.042 * o, (k, o)  # compositing error grows with opacity
+        assert np.sqrt(np.mean(error**2)) < 0.025 * o, (k, o)  # compositing error grows with opacity
         assert s <= sd.PIECE_STD / k + 1e-9  # each piece stays short
         assert np.allclose(pieces, pieces[::-1], atol=1e-6)  # symmetric about the parent's centre
+
+
+@pytest.mark.parametrize("k", [4, 8, 16, 32])
+def test_the_pieces_composite_without_bands(k):
+    """Along the parent's centre line the pieces' composite rises to its peak and falls again: a
+    dip between two pieces shows as a band across the part (docs/deformation.md, "Subdivision").
+    Pieces spaced 2.4 of their deviation apart dipped by 14-28 % of the parent's opacity."""
+    spacing, std, opacity = sd.piece_table(k)
+    half = np.linspace(4.5, 0.0, 4501)  # from the tail to the centre; the pieces are symmetric
+    for o, d, s, pieces in zip(sd._OPACITY_GRID, spacing, std, opacity):
+        centres = (np.arange(k) - (k - 1) / 2) * d
+        alpha = pieces[:, None] * np.exp(-0.5 * ((half[None] - centres[:, None]) / s) ** 2)
+        composite = 1 - np.prod(1 - alpha, axis=0)
+        dip = np.max(np.maximum.accumulate(composite) - composite)
+        assert dip <= (0.05 if o <= 0.55 else 0.13) * o, (k, o, dip)
 
 
 def test_the_shipped_table_is_what_the_fit_gives():
@@ -106,14 +121,27 @@ def test_only_needles_along_the_rod_are_split():
     )
     along = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [np.sqrt(0.5), np.sqrt(0.5), 0.0]])
     counts = sd.piece_counts(scene, np.arange(3), along, edge_length=0.031)
-    assert counts[0] == 10  # 3-sigma length 0.3 over edges of 0.031
+    assert counts[0] == 20  # 3-sigma length 0.3 over edges of 0.031, two pieces an edge
     assert counts[1] == 1  # across the rod: splitting along its length would not shorten it along the rod
-    assert 2 <= counts[2] < counts[0]
+    assert 4 <= counts[2] < counts[0]
+    # no longer than a piece may be (1.5 edges): it stays whole
+    assert sd.piece_counts(scene, np.arange(1), along[:1], edge_length=0.3 / 1.4)[0] == 1
+    assert sd.piece_counts(scene, np.arange(1), along[:1], edge_length=0.3 / 1.6)[0] == 4
 
 
-def rest_psnr(scene: GaussianScene, extraction, cameras) -> tuple[int, list[float]]:
+def rest_psnr(scene: GaussianScene, extraction, cameras, margin: int | None = None) -> tuple[int, list[float]]:
+    """Pieces added, and per camera the PSNR of the scene at rest before and after splitting: over
+    the whole image, or with `margin` over the part's box and `margin` pixels around it."""
     rig = Rig.build(scene, [extraction], [Rod(extraction.polyline, radius=extraction.radius)])
-    return len(rig.scene) - len(scene), [psnr(render(scene, c).rgb, render(rig.scene, c).rgb) for c in cameras]
+    values = []
+    for camera in cameras:
+        before, after = render(scene, camera).rgb, render(rig.scene, camera).rgb
+        if margin is not None:
+            uv, _ = camera.project(extraction.polyline)
+            (x0, y0), (x1, y1) = np.maximum(uv.min(0) - margin, 0).astype(int), (uv.max(0) + margin).astype(int)
+            before, after = before[y0:y1, x0:x1], after[y0:y1, x0:x1]
+        values.append(psnr(before, after))
+    return len(rig.scene) - len(scene), values
 
 
 def test_the_plant_renders_the_same_at_rest_after_splitting():
@@ -140,12 +168,12 @@ def guitar_neck():
 
 def test_the_guitar_neck_renders_the_same_at_rest_seen_from_the_side(guitar_neck):
     scene, extraction, cameras = guitar_neck
-    added, values = rest_psnr(scene, extraction, [cameras["az240"]])
+    added, values = rest_psnr(scene, extraction, [cameras["az240"]], margin=30)
     assert added > 10_000  # its strings and fretboard are needles
-    assert values[0] >= 45.0, values
+    assert values[0] >= 45.0, values  # over the neck's box; 43.6 dB when the pieces dipped
 
 
 def test_the_guitar_neck_renders_the_same_at_rest_seen_obliquely(guitar_neck):
     scene, extraction, cameras = guitar_neck
-    _, values = rest_psnr(scene, extraction, [cameras["az270"], cameras["az320"]])
-    assert min(values) >= 45.0, values
+    _, values = rest_psnr(scene, extraction, [cameras["az270"], cameras["az320"]], margin=30)
+    assert min(values) >= 45.0, values  # over the neck's box; 33.3 and 36.4 dB when the pieces dipped

@@ -23,13 +23,18 @@ from scipy.spatial.transform import Rotation
 
 from .scene import GaussianScene
 
-MAX_PIECES = 16
-# A piece's standard deviation along the split axis is at most PIECE_STD / k of the parent's:
-# smaller pieces follow a bend more closely but composite less exactly (1.5: rms alpha error over
-# the parent's footprint about 0.04 x its opacity).
-PIECE_STD = 1.5
-# A Gaussian is split when its 3-sigma length along the rod exceeds this many edge lengths.
-SPLIT_FROM = 1.0
+MAX_PIECES = 32
+# A piece's standard deviation along the split axis is at most PIECE_STD / k of the parent's. The
+# pieces must overlap to composite without ripple: the fit spaces them 1.8 of that deviation apart,
+# and their composite dips between two pieces by at most 5 % of the parent's opacity (13 % for
+# opaque ones; at 1.5 / k: 2.4 apart and 14-28 %, seen as bands across split needles;
+# docs/deformation.md, "Subdivision", Why two pieces an edge).
+PIECE_STD = 3.0
+# A Gaussian is split into ceil(PIECES_PER_EDGE x its 3-sigma length along the rod / edge length)
+# pieces, each then at most PIECE_STD / PIECES_PER_EDGE = 1.5 edges long (3-sigma), so that it
+# follows a bend; one no longer than that (SPLIT_FROM edges) stays whole.
+PIECES_PER_EDGE = 2.0
+SPLIT_FROM = PIECE_STD / PIECES_PER_EDGE
 _OPACITY_GRID = np.array([0.02, 0.1, 0.25, 0.4, 0.55, 0.7, 0.85, 0.95, 1.0])
 # The fit's samples: along the axis in parent sigmas, and the factor of the cross-profile.
 _ALONG = np.linspace(-4.5, 4.5, 121)
@@ -95,7 +100,8 @@ def piece_counts(scene: GaussianScene, rows: np.ndarray, tangents: np.ndarray, e
 
     A Gaussian is split when its 3-sigma length along the rod (`tangents`, (G, 3) unit, at each
     row's binding point) exceeds SPLIT_FROM edge lengths and most of that length comes from its
-    major axis (splitting along the major axis shortens it then)."""
+    major axis (splitting along the major axis shortens it then), into PIECES_PER_EDGE pieces per
+    edge of that length."""
     scales = scene.scales[rows].astype(np.float64)
     axes = Rotation.from_quat(scene.quats[rows][:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
     local = np.einsum("gji,gj->gi", axes, tangents)  # the tangent in each Gaussian's own axes
@@ -103,8 +109,8 @@ def piece_counts(scene: GaussianScene, rows: np.ndarray, tangents: np.ndarray, e
     major = np.argmax(scales, axis=1)
     from_major = (local[np.arange(len(rows)), major] * scales[np.arange(len(rows)), major]) ** 2
     length = 6 * np.sqrt(along_var)
-    counts = np.clip(np.ceil(length / (SPLIT_FROM * edge_length)), 1, MAX_PIECES).astype(np.int64)
-    counts[from_major < 0.5 * along_var] = 1
+    counts = np.clip(np.ceil(PIECES_PER_EDGE * length / edge_length), 1, MAX_PIECES).astype(np.int64)
+    counts[(length <= SPLIT_FROM * edge_length) | (from_major < 0.5 * along_var)] = 1
     return counts
 
 
