@@ -152,14 +152,14 @@ def split_bands(out: Path) -> None:
     case = next(c for c in cases if c["name"] == "donut_sprinkle_e")
     scene = scenes[case["scene"]]
     now = pull_case(scene, case, "az135")
-    constants = (sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MAX_PIECES, sd.piece_table)
+    constants = (sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MIN_PIECES, sd.MAX_PIECES, sd.piece_table)
     fitted: dict[int, tuple] = {}
     try:
-        sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MAX_PIECES = 1.5, 1.0, 1.0, 16
+        sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MIN_PIECES, sd.MAX_PIECES = 1.5, 1.0, 1.0, 1, 16
         sd.piece_table = lambda k: fitted.setdefault(k, sd.fit_piece_table(k))
         before = pull_case(scene, case, "az135")
     finally:
-        sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MAX_PIECES, sd.piece_table = constants
+        sd.PIECE_STD, sd.PIECES_PER_EDGE, sd.SPLIT_FROM, sd.MIN_PIECES, sd.MAX_PIECES, sd.piece_table = constants
     zoom = 3
     camera = now.camera.resized(now.camera.width * zoom)
     box = tuple(zoom * v for v in crop_box(now, before))

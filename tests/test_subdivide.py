@@ -124,8 +124,10 @@ def test_only_needles_along_the_rod_are_split():
     assert counts[0] == 20  # 3-sigma length 0.3 over edges of 0.031, two pieces an edge
     assert counts[1] == 1  # across the rod: splitting along its length would not shorten it along the rod
     assert 4 <= counts[2] < counts[0]
-    # no longer than a piece may be (1.5 edges): it stays whole
+    # no longer than a piece may be (1.5 edges): it stays whole, unless split from one edge (a
+    # static needle reaching into the part), and then into pieces shorter than it
     assert sd.piece_counts(scene, np.arange(1), along[:1], edge_length=0.3 / 1.4)[0] == 1
+    assert sd.piece_counts(scene, np.arange(1), along[:1], edge_length=0.3 / 1.4, split_from=1.0)[0] == 4
     assert sd.piece_counts(scene, np.arange(1), along[:1], edge_length=0.3 / 1.6)[0] == 4
 
 

@@ -30,6 +30,8 @@ DEFAULT_END_RAMP = 1.5
 # in the part follow the rod (a guitar string whose centre is on the body: left whole it stayed
 # behind as a line when the neck bent; taking every piece tore the leaves of a plant).
 REACH_IN_SHARE = 0.5
+# Edges of a static needle's length from which it is split (it runs in the part for one at least).
+STRADDLING_SPLIT_FROM = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,7 +184,9 @@ def _split_needles(
         straddling, straddling_segment = straddling[free], straddling_segment[free]
     rows = np.concatenate([binding.gaussian_ids[part], straddling])
     tangents = directions[np.concatenate([binding.segment[part], straddling_segment])]
-    counts = sd.piece_counts(scene, rows, tangents, extraction.edge_length)
+    # a static needle is split from one edge in the part: whole, it would stay behind there
+    split_from = np.r_[np.full(len(part), sd.SPLIT_FROM), np.full(len(straddling), STRADDLING_SPLIT_FROM)]
+    counts = sd.piece_counts(scene, rows, tangents, extraction.edge_length, split_from)
     if not (counts > 1).any():
         return scene, source, binding
     first = len(scene)

@@ -35,6 +35,8 @@ PIECE_STD = 3.0
 # follows a bend; one no longer than that (SPLIT_FROM edges) stays whole.
 PIECES_PER_EDGE = 2.0
 SPLIT_FROM = PIECE_STD / PIECES_PER_EDGE
+# Fewer pieces at PIECE_STD / k would be no shorter than the parent (3: one piece and two empty).
+MIN_PIECES = 4
 _OPACITY_GRID = np.array([0.02, 0.1, 0.25, 0.4, 0.55, 0.7, 0.85, 0.95, 1.0])
 # The fit's samples: along the axis in parent sigmas, and the factor of the cross-profile.
 _ALONG = np.linspace(-4.5, 4.5, 121)
@@ -95,13 +97,19 @@ def fit_piece_table(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array(spacing), np.array(std), np.array(opacity)
 
 
-def piece_counts(scene: GaussianScene, rows: np.ndarray, tangents: np.ndarray, edge_length: float) -> np.ndarray:
+def piece_counts(
+    scene: GaussianScene,
+    rows: np.ndarray,
+    tangents: np.ndarray,
+    edge_length: float,
+    split_from: float | np.ndarray = SPLIT_FROM,
+) -> np.ndarray:
     """How many pieces each of `rows` is split into (1: not split).
 
     A Gaussian is split when its 3-sigma length along the rod (`tangents`, (G, 3) unit, at each
-    row's binding point) exceeds SPLIT_FROM edge lengths and most of that length comes from its
-    major axis (splitting along the major axis shortens it then), into PIECES_PER_EDGE pieces per
-    edge of that length."""
+    row's binding point) exceeds `split_from` edge lengths (per row, or one for all) and most of
+    that length comes from its major axis (splitting along the major axis shortens it then), into
+    PIECES_PER_EDGE pieces per edge of that length, at least MIN_PIECES."""
     scales = scene.scales[rows].astype(np.float64)
     axes = Rotation.from_quat(scene.quats[rows][:, [1, 2, 3, 0]].astype(np.float64)).as_matrix()
     local = np.einsum("gji,gj->gi", axes, tangents)  # the tangent in each Gaussian's own axes
@@ -109,8 +117,8 @@ def piece_counts(scene: GaussianScene, rows: np.ndarray, tangents: np.ndarray, e
     major = np.argmax(scales, axis=1)
     from_major = (local[np.arange(len(rows)), major] * scales[np.arange(len(rows)), major]) ** 2
     length = 6 * np.sqrt(along_var)
-    counts = np.clip(np.ceil(PIECES_PER_EDGE * length / edge_length), 1, MAX_PIECES).astype(np.int64)
-    counts[(length <= SPLIT_FROM * edge_length) | (from_major < 0.5 * along_var)] = 1
+    counts = np.clip(np.ceil(PIECES_PER_EDGE * length / edge_length), MIN_PIECES, MAX_PIECES).astype(np.int64)
+    counts[(length <= np.asarray(split_from) * edge_length) | (from_major < 0.5 * along_var)] = 1
     return counts
 
 
