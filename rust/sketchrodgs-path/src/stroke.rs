@@ -211,6 +211,16 @@ fn points_outside(image: &IndexImage, stroke: &[[f32; 2]]) -> usize {
     stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_none()).count()
 }
 
+/// How many different points of the stroke lie inside the image (a point clicked three times is
+/// one: the error then says 1, not 3).
+fn distinct_inside(image: &IndexImage, stroke: &[[f32; 2]]) -> usize {
+    let mut inside: Vec<[u32; 2]> =
+        stroke.iter().filter(|p| image.pixel_at(p[0], p[1]).is_some()).map(|p| p.map(f32::to_bits)).collect();
+    inside.sort_unstable();
+    inside.dedup();
+    inside.len()
+}
+
 /// Clip, resample, smooth, and choose the depth chain. `reach_px` is how far from a sample a
 /// surface may be (the band half-width); `depth_gap` is `3R`; `focal_px` turns pixels of stroke
 /// into lateral distance (0: unknown, then the allowed change stays `3R`); `slender_radius` `R`, if
@@ -232,7 +242,7 @@ pub(crate) fn clean_stroke(
     let outside = points_outside(image, stroke);
     let too_short = |inside| PathError::StrokeTooShort { inside, outside, width: image.width, height: image.height };
     if inside.len() < 2 {
-        return Err(too_short(stroke.len() - outside));
+        return Err(too_short(distinct_inside(image, stroke)));
     }
     let (points, arc) = smooth(&inside);
     if points.len() < 2 {

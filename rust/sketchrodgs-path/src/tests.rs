@@ -218,6 +218,8 @@ fn bad_strokes_and_parameters_are_errors() {
     assert_eq!(nan, PathError::NonFiniteStroke { vertex: 1 });
     let short = scene.trace(&[[2.5, 20.5]], 0.05).unwrap_err();
     assert!(matches!(short, PathError::StrokeTooShort { inside: 1, outside: 0, .. }));
+    let same = scene.trace(&[[2.5, 20.5]; 3], 0.05).unwrap_err();
+    assert!(matches!(same, PathError::StrokeTooShort { inside: 1, outside: 0, .. }), "{same:?}");
     let outside = scene.trace(&[[-5.0, 20.5], [-9.0, 30.5]], 0.05).unwrap_err();
     assert!(matches!(outside, PathError::StrokeTooShort { inside: 0, outside: 2, .. }));
     assert!(outside.to_string().contains("2 outside the image"), "{outside}");
