@@ -10,7 +10,8 @@
    reversed stroke, 10 jittered strokes per view, the radius estimate against the measured R.
    The same for the held-out cases (tests/data/real_cases/heldout_cases.json: 10 other parts,
    stroked by someone who never saw an extraction, and never tuned on; heldout2_cases.json: 6 more,
-   drawn blind on 2026-12-07), and for the 18 sprinkles
+   drawn blind on 2026-12-07; heldout3_cases.json: 6 more, drawn blind later that day), and for the
+   18 sprinkles
    of tests/data/real_cases/sprinkle_cases.json (strokes made from the image's colour alone).
 4. The turned views (tests/data/real_cases/turned_views.json, 139 views nobody chose by hand):
    failures, the radius estimate, each rod against its source view's, folding back.
@@ -297,5 +298,6 @@ if __name__ == "__main__":
     real_cases()
     real_cases("heldout_cases.json", "held-out real captures (drawn blind, never tuned on)")
     real_cases("heldout2_cases.json", "second held-out real captures (drawn blind on 2026-12-07)")
+    real_cases("heldout3_cases.json", "third held-out real captures (drawn blind later on 2026-12-07)")
     real_cases("sprinkle_cases.json", "sprinkles, strokes from colour")
     turned_views()

@@ -1,7 +1,7 @@
 """The real cases' misses at a glance, for comparing a change to extraction: per case the targets it
 misses and its log-excess (`realcases.CaseScore.log_excess`), and the totals, for the 14 cases,
-the 10 held-out parts, the 6 second held-out parts and the 18 sprinkles made from colour
-(tests/data/real_cases). Both cores,
+the 10 held-out parts, the 6 second and 6 third held-out parts and the 18 sprinkles made from
+colour (tests/data/real_cases). Both cores,
 about 25 s; `benches/bench_extract.py` prints every figure.
 
     python benches/real_case_misses.py [--held-out-only] [--only SUBSTRING] [--turned [--save F] [--against F]]
@@ -104,7 +104,11 @@ def main() -> None:
     )
     parser.add_argument("--strokes", action="store_true", help="list each jittered stroke over the jitter max")
     args = parser.parse_args()
-    files = [("heldout_cases.json", "10 held-out parts"), ("heldout2_cases.json", "6 second held-out parts")]
+    files = [
+        ("heldout_cases.json", "10 held-out parts"),
+        ("heldout2_cases.json", "6 second held-out parts"),
+        ("heldout3_cases.json", "6 third held-out parts"),
+    ]
     if not args.held_out_only:
         files = [("cases.json", "14 cases"), *files, ("sprinkle_cases.json", "18 sprinkles (strokes from colour)")]
     with Pool(2) as pool:

@@ -7,12 +7,14 @@ strokes and what extraction made of them.
     python benches/real_case_overlays.py OUT_DIR --turned [--view CASE/SOURCE/TURN ...] [--gallery G.png]
     python benches/real_case_overlays.py OUT_DIR --held-out [--case NAME ...] [--gallery G.png]
     python benches/real_case_overlays.py OUT_DIR --second-held-out [--case NAME ...] [--gallery G.png]
+    python benches/real_case_overlays.py OUT_DIR --third-held-out [--case NAME ...] [--gallery G.png]
 
 `--gallery` also writes one picture of the first view of each named case side by side (with
 `--turned`: of every turned view drawn). `--turned` draws the turned views
 (tests/data/real_cases/turned_views.json) with R estimated, as a user who gives no radius gets them.
 `--held-out` draws the held-out cases (tests/data/real_cases/heldout_cases.json) instead of the cases,
-`--second-held-out` the second held-out cases (heldout2_cases.json).
+`--second-held-out` the second held-out cases (heldout2_cases.json), `--third-held-out` the third
+(heldout3_cases.json).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ CASES = Path(__file__).parent.parent / "tests" / "data" / "real_cases" / "cases.
 TURNED = CASES.parent / "turned_views.json"
 HELD_OUT = CASES.parent / "heldout_cases.json"
 SECOND_HELD_OUT = CASES.parent / "heldout2_cases.json"
+THIRD_HELD_OUT = CASES.parent / "heldout3_cases.json"
 MARGIN_PX = 40
 ZOOM = 2
 
@@ -70,9 +73,16 @@ def main() -> int:
     parser.add_argument("--view", action="append", help="with --turned: only this CASE/SOURCE/TURN (repeatable)")
     parser.add_argument("--held-out", action="store_true", help="draw the held-out cases instead of the cases")
     parser.add_argument("--second-held-out", action="store_true", help="draw the second held-out cases")
+    parser.add_argument("--third-held-out", action="store_true", help="draw the third held-out cases")
     args = parser.parse_args()
     scenes, cases = realcases.load_cases(
-        SECOND_HELD_OUT if args.second_held_out else HELD_OUT if args.held_out else CASES
+        THIRD_HELD_OUT
+        if args.third_held_out
+        else SECOND_HELD_OUT
+        if args.second_held_out
+        else HELD_OUT
+        if args.held_out
+        else CASES
     )
     args.out_dir.mkdir(parents=True, exist_ok=True)
     tiles = []
