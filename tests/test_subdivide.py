@@ -45,11 +45,22 @@ def test_the_pieces_composite_without_bands(k):
         assert dip <= (0.05 if o <= 0.55 else 0.13) * o, (k, o, dip)
 
 
-def test_the_shipped_table_is_what_the_fit_gives():
+def test_the_shipped_table_fits_as_well_as_a_new_fit():
+    """The shipped table is what `python -m sketchrodgs.subdivide` gives, judged by how well the
+    pieces composite to the parent, not by the parameters: where the fit is flat (2 faint pieces,
+    whose composite hardly depends on their spacing) SciPy 1.17.1 moved a spacing by 0.004."""
+    target = np.exp(-0.5 * sd._ALONG**2)[None] * sd._ACROSS[:, None]
+
+    def rms(table):
+        return np.array(
+            [
+                np.sqrt(np.mean((sd._composite(d, s, p) - o * target) ** 2))
+                for o, d, s, p in zip(sd._OPACITY_GRID, *table)
+            ]
+        )
+
     for k in (2, 7):
-        fitted, shipped = sd.fit_piece_table(k), sd.piece_table(k)
-        for a, b in zip(fitted, shipped):
-            np.testing.assert_allclose(a, b, atol=2e-3)
+        assert (rms(sd.piece_table(k)) <= rms(sd.fit_piece_table(k)) + 1e-5).all(), k
 
 
 def needle_scene() -> GaussianScene:
