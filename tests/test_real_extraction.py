@@ -1,6 +1,6 @@
 """Extraction on real captures (tests/data/real_cases: 14 slender parts of the plant, guitar, tree
 and donut captures, 2-3 views each, 10 held-out parts of the same captures that no extraction
-was tuned on, 6 more drawn blind later (heldout2), and 18 more sprinkles whose strokes were made
+was tuned on, 6 and 6 more drawn blind later (heldout2, heldout3), and 18 more sprinkles whose strokes were made
 from the image's colour alone), scored as the issue asks, without a true axis: between views,
 against the reversed stroke, under jitter, and the radius estimate (`sketchrodgs.realcases`).
 
@@ -17,13 +17,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.ndimage import distance_transform_edt
 
 from conftest import close_up
 from sketchrodgs import Camera, render
 from sketchrodgs.consistency import jittered_strokes, polyline_agreement
 from sketchrodgs.errors import PathNotFoundError
 from sketchrodgs.extract import extract_rod
-from sketchrodgs.polyline import polyline_length
+from sketchrodgs.polyline import polyline_length, resample
 from sketchrodgs.realcases import (
     SOLID_OUTPUTS,
     TARGETS,
@@ -46,6 +47,7 @@ CASE_FILES = {
     "cases": DATA / "cases.json",
     "heldout": DATA / "heldout_cases.json",
     "heldout2": DATA / "heldout2_cases.json",
+    "heldout3": DATA / "heldout3_cases.json",
     "sprinkles": DATA / "sprinkle_cases.json",
 }
 JITTER = 10
@@ -53,22 +55,35 @@ JITTER = 10
 # Measured misses (see the module docstring), as "set/case".
 MISSES = {
     "unjittered": set(),
-    "cross_given": {"heldout/plant_petiole_right", "heldout2/guitar_cradle_hook_right"},
-    "cross_estimated": {"heldout/plant_petiole_right", "heldout2/guitar_cradle_hook_right"},
+    "cross_given": {
+        "heldout/plant_petiole_right",
+        "heldout2/guitar_cradle_hook_right",
+        "heldout3/guitar_cradle_arm_right",
+    },
+    "cross_estimated": {
+        "heldout/plant_petiole_right",
+        "heldout2/guitar_cradle_hook_right",
+        "heldout3/donut_sprinkle_h",
+        "heldout3/guitar_cradle_arm_right",
+    },
     "jitter": {
         "heldout/plant_stem_back",
         "heldout/plant_petiole_right",
         "heldout/tree_branch_far_right",
         "heldout2/guitar_cradle_hook_right",
+        "heldout3/tree_fork_side_arm",
+        "heldout3/guitar_cradle_arm_right",
     },
     "radius": {
         "heldout/donut_sprinkle_d",
         "heldout2/tree_tip_back_centre",
+        "heldout3/guitar_cradle_arm_right",
         *(f"sprinkles/sprinkle_{k:02d}" for k in (15, 17)),
     },
     "end_gap": {"heldout/plant_petiole_right"},
-    "fold_back": {"heldout/plant_petiole_right"},
+    "fold_back": {"heldout/plant_petiole_right", "heldout3/guitar_cradle_arm_right"},
     "stroke_share": {"heldout/plant_petiole_right"},
+    "off_shown": set(),
 }
 
 
@@ -136,7 +151,18 @@ def _strokes_that_fail(group: str, moved, radius_given: bool) -> list[str]:
     return failed
 
 
-@pytest.mark.parametrize("group", sorted(CASE_FILES))
+@pytest.mark.parametrize(
+    "group",
+    [
+        pytest.param(
+            g,
+            marks=pytest.mark.xfail(strict=True, reason="the right cradle arm in az065 moved a pixel down runs across"),
+        )
+        if g == "heldout3"
+        else g
+        for g in sorted(CASE_FILES)
+    ],
+)
 def test_a_stroke_a_pixel_off_still_gives_a_rod(group):
     """Every view's stroke moved by a pixel left, right, up or down gives a rod with R estimated,
     where the radius estimate and the depth chain decide most (benches/real_case_shifts.py measures
@@ -206,6 +232,15 @@ def test_rods_as_drawn_cover_their_strokes(scored, name):
     the leg in front, gave a rod over 42 % of its stroke, and sprinkle_13 one over 29 %."""
     score = scored[name][1]
     assert score.stroke_share >= TARGETS["stroke_share"], score.stroke_share
+
+
+@per_case("off_shown")
+def test_rods_as_drawn_lie_on_what_their_views_show(scored, name):
+    """Views agreeing with each other can be off the part alike: the third held-out fork arm's rods
+    lay between its thin finger and the fork's other arm in all three views, 0.52 R past the
+    finger's silhouette in az250 (docs/real_captures.md, "Third held-out cases")."""
+    score = scored[name][1]
+    assert score.off_shown <= TARGETS["off_shown"], score.off_shown
 
 
 @per_case("fold_back")
@@ -315,6 +350,24 @@ def test_a_sprinkle_stroked_over_the_icing_beside_it_keeps_its_rod_on_the_sprink
     rod = extract_rod(scene, camera, jittered, radius=case["radius"])
     agreement = polyline_agreement(drawn.polyline, rod.polyline, case["radius"])
     assert agreement["max"] <= TARGETS["jitter_max"], agreement
+
+
+@pytest.mark.parametrize("view_name", ["az250", "az205"])
+def test_a_thin_finger_at_a_fork_keeps_its_rod_on_the_finger(view_name):
+    """The third held-out fork arm: its R (the arm's, below the fork) is about 2.5 times the half-width
+    of the thin finger the stroke starts on, and the recentring's cross-sections there took in the
+    fork's other arm: the rod's upper end lay between the two arms, off the finger (0.52 R past its
+    silhouette in az250, 0.37 in az205). Where the part is outlined by background, they reach no
+    further than its visible half-width allows (docs/extraction.md, "Polyline, segmentation,
+    binding", Outlined thinner than R): every point of the rod projects onto what the view shows."""
+    scene, case, camera, stroke = _case_view("heldout3", "tree_fork_side_arm", view_name)
+    images = render(scene, camera, outputs=SOLID_OUTPUTS)
+    rod = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
+    off_shown = distance_transform_edt(~images.solid)
+    uv, z = camera.project(resample(rod.polyline, case["radius"] / 4))
+    at = np.clip(np.rint(uv).astype(int), 0, [camera.width - 1, camera.height - 1])
+    off = off_shown[at[:, 1], at[:, 0]] / (case["radius"] * camera.fx / z)
+    assert off.max() <= 0.25, off.max()
 
 
 def test_a_stem_whose_path_breaks_at_a_petiole_in_front_keeps_its_length():

@@ -128,6 +128,7 @@ def cross_section_centroids(
     half_width: float,
     wide_half_width: float,
     reach: float,
+    reach_scale: npt.NDArray[np.float64] | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint32]]: ...
 def crowding(
     axis: npt.NDArray[np.float64],

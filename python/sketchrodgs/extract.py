@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from scipy.ndimage import median_filter
 from scipy.spatial import cKDTree
 
 from . import _core, near_plane
@@ -45,6 +46,10 @@ _FAR_OWNER_ROUNDS = 2
 # The depth gap between surfaces is 3 R, but at least this many pixels' world size (the search's,
 # GAP_FLOOR_PX in rust/sketchrodgs-path/src/lib.rs; docs/extraction.md, "Stroke clean-up").
 _GAP_FLOOR_PX = 8.0
+# Where the part is outlined by background, its recentring reaches no further than its visible
+# half-width allows, but not under this share of the usual reach (a dark edge that blends into
+# the background narrows what shows).
+OUTLINED_FLOOR = 0.4
 
 
 @dataclass(frozen=True, eq=False)
@@ -448,7 +453,8 @@ def _extract(
         # on a surface of another colour, the axis is the part's Gaussians' only (`_of_the_part`)
         part = _of_the_part(pl.near_box(points, scene.means, 2.5 * radius), scene, trace.colours)
         nearby = np.take(scene.means, part, axis=0)  # faster than `means[part]` (docs/extraction.md, "Speed")
-        points = pl.recentre(points, nearby, radius)
+        scale = _outlined_scale(points, camera, partial, radius, stroke, band + MARGIN_PX)
+        points = pl.recentre(points, nearby, radius, scale)
     points = pl.smooth_axis(points, radius, smoothing)
     points = pl.bridge_detours(points, radius, *_on_screen(camera, points, radius)[::2], nearby if recentre else None)
     points = pl.cut_hooked_ends(points, radius)
@@ -909,6 +915,66 @@ def _near_the_path(path: cKDTree, ids: np.ndarray, means: np.ndarray, camera: Ca
     if near.sum() < max(3, 0.5 * wide.sum()):
         near = wide
     return ids[near]
+
+
+def _outlined_scale(
+    points: np.ndarray, camera: Camera, partial: PartialRender, radius: float, stroke: np.ndarray, band_px: float
+) -> np.ndarray:
+    """Per point (M, 3) on the part's surface, how far its recentring may reach, as a share of the
+    usual: the part's visible half-width there over R, where it is outlined by background on both
+    sides (the walks across the points' direction on screen end on a pixel that shows nothing
+    within the first reach, 2.2 R, without a depth step on the way), at least OUTLINED_FLOOR; else
+    1. A part thinner than R there (a tapering finger whose R is its thicker arm's) then does not
+    take in what lies beside it (docs/extraction.md, "Polyline, segmentation, binding", Outlined
+    thinner than R)."""
+    result, m = partial.result, len(points)
+    scale = np.ones(m)
+    if m < 3 or result.index_depth is None:
+        return scale
+    solid, depth = result.is_solid(), result.index_depth
+    height, width = solid.shape
+    uv, z = camera.project(points)
+    direction = np.gradient(uv, axis=0)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    reach_px = pl.REACHES[0] * radius * camera.fx / np.maximum(z, 1e-12)
+    steps = np.arange(1, int(np.ceil(min(reach_px.max(), max(width, height)))) + 1)
+    start = np.rint(uv).astype(np.int64)
+    inside = (start >= 0).all(axis=1) & (start[:, 0] < width) & (start[:, 1] < height)
+    at = np.clip(start, 0, [width - 1, height - 1])
+    seen = inside & solid[at[:, 1], at[:, 0]]
+    start_depth = depth[at[:, 1], at[:, 0]]
+    gap = np.maximum(3 * radius, _GAP_FLOOR_PX * start_depth / camera.fx)
+    # both walks of every point at once: (2, M, steps, 2) pixels, one side each
+    sides = np.array([1.0, -1.0])[:, None, None, None]
+    walk = np.rint(uv[None, :, None, :] + sides * steps[None, None, :, None] * normal[None, :, None, :]).astype(
+        np.int64
+    )
+    known = (walk >= 0).all(axis=3) & (walk[..., 0] < width) & (walk[..., 1] < height)
+    col, row = np.clip(walk[..., 0], 0, width - 1), np.clip(walk[..., 1], 0, height - 1)
+    # Only the stroke's band is known alike to a render of the band and to one of the whole view:
+    # a pixel within `band_px` of the stroke lies in a band tile (`band_tiles`), and a walk's k-th
+    # pixel lies within k + 1/2 of its start (a pixel more for the float32 distance)
+    flat = np.zeros((len(stroke), 3), np.float32)
+    flat[:, :2] = stroke
+    on_screen = np.zeros((m, 3), np.float32)
+    on_screen[:, :2] = uv
+    _, _, off_stroke = _core.nearest_on_polyline(flat, on_screen, band_px)  # inf: further
+    room = band_px - off_stroke - 1.5
+    known &= steps[None, None, :] <= room[None, :, None]
+    shows = solid[row, col]
+    stepped = shows & (np.abs(depth[row, col] - start_depth[None, :, None]) > gap[None, :, None])
+    within = steps[None, None, :] <= reach_px[None, :, None]
+    # the first step that ends a walk: nothing shown (outlined), a depth step, or not known
+    ends = ~known | ~shows | stepped | ~within
+    first = np.argmax(ends, axis=2)[..., None]
+    outlined = ends.any(axis=2) & np.take_along_axis(known & ~shows & within, first, axis=2)[..., 0]
+    half = np.where(outlined, steps[first[..., 0]] - 0.5, np.nan)
+    both = seen & np.isfinite(half[0]) & np.isfinite(half[1])
+    px = radius * camera.fx / np.maximum(z, 1e-12)
+    scale[both] = np.clip((half[0][both] + half[1][both]) / 2 / px[both], OUTLINED_FLOOR, 1.0)
+    # one walk across a gap in the part, or past its tip, is one point: the median of five
+    return median_filter(scale, size=5, mode="nearest")
 
 
 def _of_the_part(ids: np.ndarray, scene: GaussianScene, colours: tuple | None) -> np.ndarray:

@@ -35,7 +35,7 @@ _SHORT_AXIS_STRAIGHT = (0.5, 1.5)
 
 # Recentring looks for the cross-section within 2.2 radii of a surface point, then refines twice
 # around the centroid with a tighter reach (each pass also steadies the tangent that orients the slab).
-_REACHES = (2.2, 1.5, 1.5)
+REACHES = (2.2, 1.5, 1.5)
 # cut_hooked_ends: an end's first radii, the axis beyond them (to this far from the end, or to the
 # other end on a short axis, at least _HOOK_AXIS_LEAST long), the turn that is a hook, how often an
 # end is cut (at 60 degrees, or once an end, the main stem's ends stayed hooked), and how much a
@@ -113,7 +113,9 @@ def tangents(points: np.ndarray, reach: int = 1) -> np.ndarray:
     return np.divide(t, norms, out=np.zeros_like(t), where=norms > 0)
 
 
-def recentre(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
+def recentre(
+    points: np.ndarray, centres: np.ndarray, radius: float, reach_scale: np.ndarray | None = None
+) -> np.ndarray:
     """Move points on an object's surface onto its axis.
 
     Each point becomes the centroid of its cross-section: the Gaussians within R/2 of its plane
@@ -125,6 +127,8 @@ def recentre(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarr
         points: (M, 3) polyline on the visible surface, in order, about R/2 apart.
         centres: (N, 3) Gaussian centres near the object (a pre-filtered subset keeps it fast).
         radius: R, the object's radius.
+        reach_scale: (M,) how far each point's cross-sections reach, as a share of those reaches
+            (where the part shows thinner than R: `extract._outlined_scale`); None: 1 everywhere.
 
     Returns:
         (M, 3) float64 recentred points.
@@ -135,13 +139,16 @@ def recentre(points: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarr
     members = _f32(centres)
     # The points move by about R at most, so a Gaussian's cross-sections stay among its nearest
     # point (found once, here) and that point's neighbours (points are ~R/2 apart, a slab R wide).
-    segment, t, _ = _core.nearest_on_polyline(_f32(axis), members, (_REACHES[0] + 1) * radius)
+    segment, t, _ = _core.nearest_on_polyline(_f32(axis), members, (REACHES[0] + 1) * radius)
     nearest = np.where(segment >= 0, segment + (t >= 0.5), -1).astype(np.int32)
-    for reach in _REACHES:
+    scale = None if reach_scale is None else np.ascontiguousarray(reach_scale, np.float64)
+    for reach in REACHES:
         # surface points are noisy: take tangents over +-2 R of the smoothed line
         spacing = max(polyline_length(axis) / (len(axis) - 1), 1e-12)
         tangent = tangents(laplacian_smooth(axis, 5), reach=max(1, int(round(2 * radius / spacing))))
-        axis, _ = _core.cross_section_centroids(axis, tangent, members, nearest, radius / 2, radius, reach * radius)
+        axis, _ = _core.cross_section_centroids(
+            axis, tangent, members, nearest, radius / 2, radius, reach * radius, scale
+        )
     return _straighten_ends(axis, np.asarray(points, np.float64), radius)
 
 

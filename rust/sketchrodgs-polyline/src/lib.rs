@@ -343,12 +343,12 @@ pub fn nearest_on_polyline(
 const LEAST_MEMBERS: u32 = 2;
 
 /// Centroid of each polyline vertex's cross-section: the points within `half_width` of the plane
-/// through vertex `i` across `tangents[i]` and within `reach` of the vertex. A point is tried
-/// against its `nearest_vertex` and that vertex's two neighbours only (-1: no nearest vertex).
-/// A cross-section of fewer than `LEAST_MEMBERS` points is taken again within `wide_half_width` of
-/// the plane, from the points whose nearest vertex lies within `2 reach` along the axis. A vertex
-/// whose cross-section is empty even then keeps its position. Returns the centroids and the number
-/// of points each was taken over.
+/// through vertex `i` across `tangents[i]` and within `reach[i]` of the vertex (a vertex without
+/// a reach takes none). A point is tried against its `nearest_vertex` and that vertex's two
+/// neighbours only (-1: no nearest vertex). A cross-section of fewer than `LEAST_MEMBERS` points is
+/// taken again within `wide_half_width` of the plane, from the points whose nearest vertex lies
+/// within `2 reach[i]` along the axis. A vertex whose cross-section is empty even then keeps its
+/// position. Returns the centroids and the number of points each was taken over.
 pub fn cross_section_centroids(
     axis: &[[f64; 3]],
     tangents: &[[f64; 3]],
@@ -356,14 +356,14 @@ pub fn cross_section_centroids(
     nearest_vertex: &[i32],
     half_width: f64,
     wide_half_width: f64,
-    reach: f64,
+    reach: &[f64],
 ) -> (Vec<[f64; 3]>, Vec<u32>) {
     // whether `p` lies in vertex `i`'s cross-section of half width `half`
     let inside = |i: usize, p: [f64; 3], half: f64| {
-        let (Some(a), Some(t)) = (axis.get(i), tangents.get(i)) else { return false };
+        let (Some(a), Some(t), Some(&r)) = (axis.get(i), tangents.get(i), reach.get(i)) else { return false };
         let d = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
         let along = d[0] * t[0] + d[1] * t[1] + d[2] * t[2];
-        along.abs() <= half && d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= reach * reach
+        along.abs() <= half && d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= r * r
     };
     // The vertices in one run per thread, in parallel: each run reads every point and sums those of
     // its own vertices, in point order as one pass over the points would, so the sums do not
@@ -412,6 +412,7 @@ pub fn cross_section_centroids(
         let arc = detours::arc_in_radii(axis, 1.0);
         for i in sparse {
             // the vertices within 2 reaches along the axis (the arc only grows)
+            let reach = reach.get(i).copied().unwrap_or(0.0);
             let from = arc.partition_point(|&s| s < arc[i] - 2.0 * reach);
             let to = arc.partition_point(|&s| s <= arc[i] + 2.0 * reach).max(from);
             let (mut sum, mut count) = ([0.0_f64; 3], 0_u32);
@@ -623,15 +624,39 @@ mod tests {
                 nearest.push(i);
             }
         }
-        let (centroids, counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.25, 0.25, 2.2);
+        let (centroids, counts) =
+            cross_section_centroids(&axis, &tangents, &points, &nearest, 0.25, 0.25, &vec![2.2; axis.len()]);
         for (c, n) in centroids.iter().zip(&counts) {
             assert_eq!(*n, 8); // half width 0.25 < spacing 0.5: only its own ring
             assert!(c[1].abs() < 1e-6 && c[2].abs() < 1e-6, "{c:?}");
         }
         // a vertex with nothing around keeps its place; points without a nearest vertex are skipped
         let (centroids, counts) =
-            cross_section_centroids(&axis[..2], &tangents[..2], &[[9.0, 9.0, 9.0]], &[-1], 0.25, 1.0, 2.2);
+            cross_section_centroids(&axis[..2], &tangents[..2], &[[9.0, 9.0, 9.0]], &[-1], 0.25, 1.0, &[2.2; 2]);
         assert_eq!((centroids[0], counts[0]), (axis[0], 0));
+    }
+
+    #[test]
+    fn each_vertex_reaches_as_far_as_its_own_reach() {
+        // a ring-sampled tube of radius 0.4 along x, and beside it (1.4 off the axis) a second
+        // tube: within 2.2 of the axis a cross-section takes both, within 0.9 its own only
+        let axis: Vec<[f64; 3]> = (0..5).map(|i| [i as f64 * 0.5, 0.0, 0.0]).collect();
+        let tangents = vec![[1.0, 0.0, 0.0]; 5];
+        let (mut points, mut nearest) = (Vec::new(), Vec::new());
+        for (i, centre) in (0..5).flat_map(|i| [(i, 0.0_f32), (i, 1.4)]) {
+            for k in 0..8 {
+                let a = k as f32 * std::f32::consts::FRAC_PI_4;
+                points.push([i as f32 * 0.5, centre + 0.4 * a.cos(), 0.4 * a.sin()]);
+                nearest.push(i);
+            }
+        }
+        let reach = [2.2, 2.2, 0.9, 0.9, 2.2];
+        let (centroids, counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.2, 0.2, &reach);
+        for i in 0..5 {
+            let (own_only, y) = if reach[i] < 1.0 { (8, 0.0) } else { (16, 0.7) };
+            assert_eq!(counts[i], own_only);
+            assert!((centroids[i][1] - y).abs() < 1e-5, "{i}: {:?}", centroids[i]);
+        }
     }
 
     #[test]
@@ -642,8 +667,10 @@ mod tests {
         let tangents = vec![[1.0, 0.0, 0.0]; 11];
         let points = [[1.2, -1.0, 0.0], [2.0, 1.0, 0.0], [2.8, -1.0, 0.0]];
         let nearest = [2, 4, 6];
-        let (narrow, narrow_counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.5, 0.5, 2.2);
-        let (centroids, counts) = cross_section_centroids(&axis, &tangents, &points, &nearest, 0.5, 1.0, 2.2);
+        let (narrow, narrow_counts) =
+            cross_section_centroids(&axis, &tangents, &points, &nearest, 0.5, 0.5, &vec![2.2; axis.len()]);
+        let (centroids, counts) =
+            cross_section_centroids(&axis, &tangents, &points, &nearest, 0.5, 1.0, &vec![2.2; axis.len()]);
         // at x = 2 the slab of half width 0.5 holds one Gaussian, and the axis went to its side
         assert_eq!((narrow[4], narrow_counts[4]), ([2.0, 1.0, 0.0], 1));
         // within 1 of the plane it holds all three
@@ -654,7 +681,8 @@ mod tests {
         assert!((centroids[3][0] - 1.6).abs() < 1e-6 && centroids[3][1].abs() < 1e-6);
         assert_eq!((centroids[10], counts[10]), (axis[10], 0));
         // nearest vertices past the axis, or more of them than points, are skipped
-        let (_, counts) = cross_section_centroids(&axis, &tangents, &points[..1], &[2, 40, -1], 0.5, 1.0, 2.2);
+        let (_, counts) =
+            cross_section_centroids(&axis, &tangents, &points[..1], &[2, 40, -1], 0.5, 1.0, &vec![2.2; axis.len()]);
         assert_eq!(counts[2], 1);
     }
 

@@ -61,9 +61,11 @@ type Centroids<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u32>>);
 
 /// Centroids of the cross-sections of `axis` (M, 3) float64 with unit `tangents` (M, 3) float64,
 /// from `points` (N, 3) float32 tried against their `nearest_vertex` (N,) int32 (-1: none) and its
-/// neighbours; a cross-section of fewer than two points is taken again within `wide_half_width`.
+/// neighbours, within `reach` of each vertex, times its `reach_scale` (M,) float64 where given;
+/// a cross-section of fewer than two points is taken again within `wide_half_width`.
 /// Returns (centroids (M, 3) float64, counts (M,) uint32).
 #[pyfunction]
+#[pyo3(signature = (axis, tangents, points, nearest_vertex, half_width, wide_half_width, reach, reach_scale=None))]
 #[allow(clippy::too_many_arguments)]
 fn cross_section_centroids<'py>(
     py: Python<'py>,
@@ -74,6 +76,7 @@ fn cross_section_centroids<'py>(
     half_width: f64,
     wide_half_width: f64,
     reach: f64,
+    reach_scale: Option<&Bound<'py, PyArray1<f64>>>,
 ) -> PyResult<Centroids<'py>> {
     let (axis, tangents) = (axis.try_readonly()?, tangents.try_readonly()?);
     let (points, nearest) = (points.try_readonly()?, nearest_vertex.try_readonly()?);
@@ -82,6 +85,21 @@ fn cross_section_centroids<'py>(
     check_shape("tangents", tangents.shape(), &[Some(m), Some(3)])?;
     check_shape("points", points.shape(), &[None, Some(3)])?;
     check_shape("nearest_vertex", nearest.shape(), &[Some(points.shape()[0])])?;
+    let reach: Vec<f64> = match reach_scale {
+        None => vec![reach; m],
+        Some(scale) => {
+            let scale = scale.try_readonly()?;
+            check_shape("reach_scale", scale.shape(), &[Some(m)])?;
+            let scale = contiguous(&scale, "reach_scale")?;
+            if let Some(i) = scale.iter().position(|s| !(s.is_finite() && *s >= 0.0)) {
+                return Err(SketchRodGSError::new_err(format!(
+                    "reach_scale: entry {i} must be finite and >= 0, got {}",
+                    scale[i]
+                )));
+            }
+            scale.iter().map(|s| reach * s).collect()
+        }
+    };
     let axis: &[[f64; 3]] = contiguous(&axis, "axis")?.as_chunks::<3>().0;
     let tangents: &[[f64; 3]] = contiguous(&tangents, "tangents")?.as_chunks::<3>().0;
     let points: &[[f32; 3]] = as_rows(contiguous(&points, "points")?);
@@ -94,7 +112,7 @@ fn cross_section_centroids<'py>(
             nearest,
             half_width,
             wide_half_width,
-            reach,
+            &reach,
         )
     })?;
     let centroids = numpy::ndarray::Array2::from_shape_vec((m, 3), centroids.into_iter().flatten().collect())
