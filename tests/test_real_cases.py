@@ -1,4 +1,5 @@
-"""The real-capture stroke set (tests/data/real_cases/cases.json) is well formed, and the number
+"""The real-capture stroke sets drawn by hand (tests/data/real_cases: cases.json and the three
+held-out sets) are well formed, and the number
 changes to extraction are compared by (`CaseScore.log_excess`) adds up what it should."""
 
 from __future__ import annotations
@@ -13,7 +14,13 @@ import pytest
 from sketchrodgs import Camera, data
 
 ROOT = Path(__file__).parent.parent
-CASES = json.loads((ROOT / "tests" / "data" / "real_cases" / "cases.json").read_text(encoding="utf-8"))
+DATA = ROOT / "tests" / "data" / "real_cases"
+CASES = json.loads((DATA / "cases.json").read_text(encoding="utf-8"))
+# the hand-drawn sets: the cases and the three held-out sets, drawn the same way
+DRAWN = {
+    name: json.loads((DATA / f"{name}.json").read_text(encoding="utf-8"))
+    for name in ("cases", "heldout_cases", "heldout2_cases", "heldout3_cases")
+}
 
 
 def test_scenes_exist() -> None:
@@ -29,7 +36,16 @@ def test_at_least_twelve_parts_over_four_scenes() -> None:
     assert {case["scene"] for case in CASES["cases"]} == set(CASES["scenes"])
 
 
-@pytest.mark.parametrize("case", CASES["cases"], ids=lambda case: case["name"])
+def test_no_part_is_in_two_sets() -> None:
+    names = [case["name"] for cases in DRAWN.values() for case in cases["cases"]]
+    assert len(set(names)) == len(names)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [case for cases in DRAWN.values() for case in cases["cases"]],
+    ids=lambda case: case["name"],
+)
 def test_case(case: dict) -> None:
     assert case["radius"] > 0 and case["description"]
     assert 2 <= len(case["views"]) <= 3
