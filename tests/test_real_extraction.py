@@ -17,20 +17,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.ndimage import distance_transform_edt
 
 from conftest import close_up
 from sketchrodgs import Camera, render
 from sketchrodgs.consistency import jittered_strokes, polyline_agreement
 from sketchrodgs.errors import PathNotFoundError
 from sketchrodgs.extract import extract_rod
-from sketchrodgs.polyline import polyline_length, resample
+from sketchrodgs.polyline import polyline_length
 from sketchrodgs.realcases import (
     SOLID_OUTPUTS,
     TARGETS,
     end_gap,
     jitter_seed,
     load_cases,
+    off_shown,
     overshooting,
     part_strokes,
     run_case,
@@ -363,11 +363,8 @@ def test_a_thin_finger_at_a_fork_keeps_its_rod_on_the_finger(view_name):
     scene, case, camera, stroke = _case_view("heldout3", "tree_fork_side_arm", view_name)
     images = render(scene, camera, outputs=SOLID_OUTPUTS)
     rod = extract_rod(scene, camera, stroke, radius=case["radius"], render=images)
-    off_shown = distance_transform_edt(~images.solid)
-    uv, z = camera.project(resample(rod.polyline, case["radius"] / 4))
-    at = np.clip(np.rint(uv).astype(int), 0, [camera.width - 1, camera.height - 1])
-    off = off_shown[at[:, 1], at[:, 0]] / (case["radius"] * camera.fx / z)
-    assert off.max() <= 0.25, off.max()
+    off = off_shown(rod.polyline, camera, images.solid, case["radius"])
+    assert off <= TARGETS["off_shown"], off
 
 
 def test_a_stem_whose_path_breaks_at_a_petiole_in_front_keeps_its_length():

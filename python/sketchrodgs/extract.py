@@ -937,7 +937,8 @@ def _outlined_scale(
     direction = np.gradient(uv, axis=0)
     normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    reach_px = pl.REACHES[0] * radius * camera.fx / np.maximum(z, 1e-12)
+    px = radius * camera.fx / np.maximum(z, 1e-12)  # R on screen at each point
+    reach_px = pl.REACHES[0] * px
     steps = np.arange(1, int(np.ceil(min(reach_px.max(), max(width, height)))) + 1)
     start = np.rint(uv).astype(np.int64)
     inside = (start >= 0).all(axis=1) & (start[:, 0] < width) & (start[:, 1] < height)
@@ -955,11 +956,7 @@ def _outlined_scale(
     # Only the stroke's band is known alike to a render of the band and to one of the whole view:
     # a pixel within `band_px` of the stroke lies in a band tile (`band_tiles`), and a walk's k-th
     # pixel lies within k + 1/2 of its start (a pixel more for the float32 distance)
-    flat = np.zeros((len(stroke), 3), np.float32)
-    flat[:, :2] = stroke
-    on_screen = np.zeros((m, 3), np.float32)
-    on_screen[:, :2] = uv
-    _, _, off_stroke = _core.nearest_on_polyline(flat, on_screen, band_px)  # inf: further
+    _, _, off_stroke = _core.nearest_on_polyline(pl.in_plane(stroke), pl.in_plane(uv), band_px)  # inf: further
     room = band_px - off_stroke - 1.5
     known &= steps[None, None, :] <= room[None, :, None]
     shows = solid[row, col]
@@ -971,7 +968,6 @@ def _outlined_scale(
     outlined = ends.any(axis=2) & np.take_along_axis(known & ~shows & within, first, axis=2)[..., 0]
     half = np.where(outlined, steps[first[..., 0]] - 0.5, np.nan)
     both = seen & np.isfinite(half[0]) & np.isfinite(half[1])
-    px = radius * camera.fx / np.maximum(z, 1e-12)
     scale[both] = np.clip((half[0][both] + half[1][both]) / 2 / px[both], OUTLINED_FLOOR, 1.0)
     # one walk across a gap in the part, or past its tip, is one point: the median of five
     return median_filter(scale, size=5, mode="nearest")

@@ -564,6 +564,12 @@ def nearest_on_polyline(points: np.ndarray, polyline: np.ndarray) -> tuple[np.nd
     return distance, where
 
 
+def in_plane(xy: np.ndarray) -> np.ndarray:
+    """(N, 2) pixel coordinates as (N, 3) float32 points at z = 0, for the Rust point-to-polyline
+    search on screen (`_core.nearest_on_polyline`)."""
+    return np.ascontiguousarray(np.column_stack([xy, np.zeros(len(xy))]), np.float32)
+
+
 def polyline_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 

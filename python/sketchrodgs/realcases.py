@@ -376,14 +376,9 @@ def fold_back(extraction: Extraction) -> float:
     arc = pl.arc_lengths(stroke)
     # the nearest point on the stroke, in the image plane (z = 0); the reach takes in every vertex
     reach = float(np.max(np.linalg.norm(uv - stroke[0], axis=1))) + arc[-1] + 1.0
-    segment, t, _ = _core.nearest_on_polyline(_in_plane(stroke), _in_plane(uv), reach)
+    segment, t, _ = _core.nearest_on_polyline(pl.in_plane(stroke), pl.in_plane(uv), reach)
     placed = arc[segment] + t * np.diff(arc)[segment]
     return float(np.max(np.maximum.accumulate(placed) - placed)) / radius_px
-
-
-def _in_plane(xy: np.ndarray) -> np.ndarray:
-    """(N, 2) pixel coordinates as (N, 3) float32 points at z = 0."""
-    return np.ascontiguousarray(np.column_stack([xy, np.zeros(len(xy))]), np.float32)
 
 
 def _on_screen(extraction: Extraction) -> tuple[np.ndarray, float]:
