@@ -21,11 +21,12 @@ from _table import best_time, print_table
 from capture_scene import capture_scene
 from sketchrodgs import save_scene
 from sketchrodgs.animate import Animation, Pull
-from sketchrodgs.extract import bindings_path, extract_rod
+from sketchrodgs.extract import extract_rod
 from sketchrodgs.frames import FrameRenderer
 from sketchrodgs.images import FRAME_PNG_LEVEL, save_png, to_uint8
 from sketchrodgs.partial_render import MARGIN_PX, band_tiles
 from sketchrodgs.render import COLOR_OUTPUTS, SOLID_OUTPUTS, render
+from sketchrodgs.rod_file import bindings_path
 
 REPEAT = 5
 RENDER_ROUNDS = 3

@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from sketchrodgs import Camera
-from sketchrodgs.extract import load_rod
+from sketchrodgs.rod_file import load_rod
 
 ROOT = Path(__file__).parent.parent
 CASES = json.loads((ROOT / "tests" / "data" / "real_cases" / "cases.json").read_text())

@@ -260,7 +260,7 @@ def test_a_rod_refuses_another_scene_of_the_same_size(ring_rod, tmp_path, capsys
 
 def test_the_scene_identity_survives_conversion_and_old_rods_still_load(ring_rod, tmp_path):
     from sketchrodgs.animate import Animation
-    from sketchrodgs.extract import Extraction
+    from sketchrodgs.rod_file import Extraction
 
     path, extraction = ring_rod
     save_scene(load_scene(data.sample("ring")), tmp_path / "ring.ply")  # .splat -> .ply: the same means

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from sketchrodgs import Camera, data, load_scene
-from sketchrodgs.extract import load_rod
+from sketchrodgs.rod_file import load_rod
 
 CAMERA = Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=480, height=270, fov_y_deg=40)
 

@@ -11,8 +11,8 @@ from PIL import Image
 
 from sketchrodgs import Camera, data, load_cameras, load_scene, save_scene
 from sketchrodgs.cli import main
-from sketchrodgs.extract import load_rod
 from sketchrodgs.io import detect_format, scene_file, training_cameras
+from sketchrodgs.rod_file import load_rod
 
 # what the reference trainer leaves: training views of the ring, taken with +y up in the image
 VIEWS = [Camera.look_at((0, 0, -1.4), (0, 0, 0), up=(0, 1, 0), width=320, height=180, fov_y_deg=40)] + [

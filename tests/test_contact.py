@@ -10,8 +10,8 @@ from sketchrodgs import GaussianScene, data, extract_rod, load_scene
 from sketchrodgs.animate import Animation, Pull
 from sketchrodgs.contact import scene_field
 from sketchrodgs.errors import SimulationError
-from sketchrodgs.extract import Extraction
 from sketchrodgs.rod import ContactSettings, Rod, World
+from sketchrodgs.rod_file import Extraction
 
 R = 0.01
 

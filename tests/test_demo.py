@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from sketchrodgs import Camera, data, load_scene
-from sketchrodgs.extract import load_rod
+from sketchrodgs.rod_file import load_rod
 
 pytestmark = pytest.mark.slow  # run by default; `-m "not slow"` leaves it out
 

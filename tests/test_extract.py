@@ -17,8 +17,9 @@ from conftest import DATA, sprinkle_close_up
 from sketchrodgs import Camera, GaussianScene, PathNotFoundError, SketchRodGSError, load_scene, synthetic
 from sketchrodgs.baseline import knn_path
 from sketchrodgs.consistency import polyline_agreement
-from sketchrodgs.extract import Extraction, extract_rod, load_rod
+from sketchrodgs.extract import extract_rod
 from sketchrodgs.render import render
+from sketchrodgs.rod_file import Extraction, load_rod
 from sketchrodgs.synthetic import floor_camera, floor_stroke
 
 CAMERA = Camera.look_at((0, 0, -1.5), (0, 0, 0), up=(0, 1, 0), width=960, height=540, fov_y_deg=40)

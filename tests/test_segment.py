@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from sketchrodgs import Camera, SketchRodGSError, extract_rod, synthetic
-from sketchrodgs.extract import Extraction
 from sketchrodgs.polyline import polyline_length
 from sketchrodgs.rod import Rod
+from sketchrodgs.rod_file import Extraction
 from sketchrodgs.scene import GaussianScene
 from sketchrodgs.segment import (
     DEFAULT_GROW,

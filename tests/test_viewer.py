@@ -21,8 +21,8 @@ from scipy.spatial.transform import Rotation
 from sketchrodgs import Camera, data, extract_rod, load_scene
 from sketchrodgs.contact import scene_field
 from sketchrodgs.errors import SketchRodGSError
-from sketchrodgs.extract import load_rod
 from sketchrodgs.io import load_scene as load_any
+from sketchrodgs.rod_file import load_rod
 from sketchrodgs.skin import skin
 from sketchrodgs.viewer import ViewerApp
 from sketchrodgs.viewer.camera import (

@@ -24,7 +24,7 @@ _EXPORTS = {
     "BoundRod": "skin",
     "Camera": "camera",
     "CameraError": "errors",
-    "Extraction": "extract",
+    "Extraction": "rod_file",
     "GaussianScene": "scene",
     "PathNotFoundError": "errors",
     "RenderResult": "render",
@@ -37,7 +37,7 @@ _EXPORTS = {
     "World": "rod",
     "extract_rod": "extract",
     "load_cameras": "camera",
-    "load_rod": "extract",
+    "load_rod": "rod_file",
     "load_scene": "io",
     "render": "render",
     "save_scene": "io",
@@ -104,10 +104,11 @@ if TYPE_CHECKING:
     from . import data
     from .camera import Camera, load_cameras
     from .errors import CameraError, PathNotFoundError, SceneFormatError, SimulationError, SketchRodGSError
-    from .extract import Extraction, extract_rod, load_rod
+    from .extract import extract_rod
     from .io import load_scene, save_scene
     from .render import RenderResult, render
     from .rig import Rig
     from .rod import Rod, RodParams, World
+    from .rod_file import Extraction, load_rod
     from .scene import GaussianScene
     from .skin import BoundRod, skin

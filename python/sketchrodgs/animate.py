@@ -23,11 +23,11 @@ import numpy as np
 
 from .contact import SceneField, scene_field
 from .errors import SimulationError, SketchRodGSError
-from .extract import Extraction
 from .framing import AXES
 from .polyline import arc_lengths, polyline_length
 from .rig import DEFAULT_END_RAMP, Rig
 from .rod import ContactSettings, Rod, RodParams, World
+from .rod_file import Extraction
 from .scene import GaussianScene
 from .scene_identity import check_rod_scene
 from .skin import skin_into

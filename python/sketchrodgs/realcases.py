@@ -27,9 +27,10 @@ from . import polyline as pl
 from .camera import Camera
 from .data import sample
 from .errors import PathNotFoundError
-from .extract import Extraction, extract_rod
+from .extract import extract_rod
 from .io import load_scene
 from .render import SOLID_OUTPUTS, RenderResult, render
+from .rod_file import Extraction
 from .scene import GaussianScene
 
 # The targets, in units of the case's radius R.

@@ -17,8 +17,9 @@ import numpy as np
 from . import deform_metrics
 from .animate import Animation, Pull
 from .camera import Camera
-from .extract import Extraction, extract_rod
+from .extract import extract_rod
 from .polyline import polyline_length
+from .rod_file import Extraction
 from .scene import GaussianScene
 
 # (case, view) pairs pulled: the guitar neck, a tree branch and a plant stem, as the issue asks.

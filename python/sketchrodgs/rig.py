@@ -16,9 +16,9 @@ from scipy.spatial.transform import Rotation
 from . import _core
 from . import subdivide as sd
 from .errors import SketchRodGSError
-from .extract import Extraction
 from .polyline import arc_lengths, near_box
 from .rod import Rod
+from .rod_file import Extraction
 from .scene import GaussianScene
 from .segment import Binding, check_rows, past_an_end, point_at
 from .separation import trim_shell

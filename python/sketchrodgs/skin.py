@@ -20,8 +20,8 @@ import numpy as np
 
 from . import _core
 from .errors import SketchRodGSError
-from .extract import Extraction
 from .rod import Rod
+from .rod_file import Extraction
 from .scene import GaussianScene
 from .segment import Binding, check_rows
 

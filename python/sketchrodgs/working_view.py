@@ -22,7 +22,7 @@ from .errors import PathNotFoundError
 from .render import RenderResult
 
 if TYPE_CHECKING:
-    from .extract import Extraction
+    from .rod_file import Extraction
 
 WORKING_WIDTH = 960
 

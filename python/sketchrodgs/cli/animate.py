@@ -162,12 +162,12 @@ def run(args: argparse.Namespace) -> int:
     from ..atomic import atomic_write_text
     from ..camera import load_cameras, select_camera
     from ..errors import SimulationError, SketchRodGSError
-    from ..extract import load_rod
     from ..frames import FrameRenderer
     from ..images import FRAME_PNG_LEVEL, save_png, to_uint8
     from ..io import load_scene, save_scene
     from ..render import COLOR_OUTPUTS
     from ..rod import RodParams
+    from ..rod_file import load_rod
     from ..scene_identity import check_rod_scene
     from ..video import VideoWriter
     from ._outputs import Outputs

@@ -85,10 +85,11 @@ def load_stroke(path: str) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     from ..camera import select_camera
     from ..errors import PathNotFoundError
-    from ..extract import bindings_path, extract_rod
+    from ..extract import extract_rod
     from ..images import draw_overlay, save_image
     from ..io import load_scene
     from ..render import render
+    from ..rod_file import bindings_path
     from ._args import UsageError
     from ._framing import camera_file, scene_cameras, with_near
     from ._outputs import Outputs

@@ -129,9 +129,9 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from ..camera import select_camera
-    from ..extract import load_rod
     from ..framing import AXES, frame_scene, scene_up
     from ..io import format_up, load_scene
+    from ..rod_file import load_rod
     from ..scene_identity import check_rod_scene
     from ..viewer import ViewerApp
     from ..viewer.material import GRAVITY, Material

@@ -34,7 +34,7 @@ from .. import _core
 from ..errors import SceneFormatError
 from ..scene import GaussianScene, sh_coefficient_count
 from ._quantized import empty_scene_arrays
-from .ply import _check_header
+from .ply_header import check_header
 
 CHUNK_SIZE = 256
 CHUNK_BOUNDS = (
@@ -65,7 +65,7 @@ def read_compressed_ply(path: str | os.PathLike[str]) -> GaussianScene:
         SceneFormatError: the file is unreadable, not a compressed PLY, or its element counts or
             properties disagree with the format.
     """
-    _check_header(path)  # the INRIA reader's guard against counts larger than the file
+    check_header(path)  # the INRIA reader's guard against counts larger than the file
     try:
         data = plyfile.PlyData.read(os.fspath(path))
     except Exception as exc:  # plyfile raises many types for bad bytes; name the file instead

@@ -12,6 +12,7 @@ from .. import _core
 from ..atomic import atomic_open
 from ..errors import SceneFormatError
 from ..scene import GaussianScene, sh_coefficient_count
+from .ply_header import HEADER_LIMIT, check_header
 
 REQUIRED = (
     "x",
@@ -30,7 +31,6 @@ REQUIRED = (
     "rot_3",
 )
 _REST_COUNT_TO_DEGREE = {3 * (sh_coefficient_count(d) - 1): d for d in range(4)}
-_HEADER_LIMIT = 1 << 16  # a header longer than this is not a 3DGS file
 # Opacity is stored as a logit; 0 and 1 would be infinite, so they are pulled this far inside.
 _OPACITY_EPS = 1e-7
 _UNIT_NORM_SLACK = 2.0**-21  # a few float32 ulps around 1
@@ -52,7 +52,7 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianScene:
     Scales are exponentiated, opacities passed through the sigmoid and rotations normalised
     (`rot_0` is w). Extra properties (normals, `transform`, ...) are ignored.
     """
-    _check_header(path)
+    check_header(path)
     fast = _float_vertex_table(path)
     if fast is not None:
         names, gather = fast
@@ -161,7 +161,7 @@ def _float_vertex_table(path: str | os.PathLike[str]):
     `gather(columns_a, columns_b, ...)` reads the file once, in blocks of rows, into one float32
     array per column list; None for any other layout (plyfile then reads it)."""
     with open(path, "rb") as stream:
-        head = stream.read(_HEADER_LIMIT)
+        head = stream.read(HEADER_LIMIT)
         size = os.fstat(stream.fileno()).st_size
     end = head.find(b"end_header\n")
     lines = head[:end].split(b"\n")
@@ -211,7 +211,7 @@ def _float_vertex_table(path: str | os.PathLike[str]):
 def _check_body(path: str | os.PathLike[str], data: plyfile.PlyData) -> None:
     """What plyfile lets pass: rows past the header's counts, and an ASCII file cut inside a number."""
     with open(path, "rb") as stream:
-        head = stream.read(_HEADER_LIMIT)
+        head = stream.read(HEADER_LIMIT)
         size = os.fstat(stream.fileno()).st_size
         end = head.find(b"end_header")
         start = head.index(b"\n", end) + 1 if end >= 0 and b"\n" in head[end:] else size
@@ -245,35 +245,3 @@ def _check_body(path: str | os.PathLike[str], data: plyfile.PlyData) -> None:
                 f"{path}: {size - start - expected} bytes after the last row the header declares "
                 "(its counts are below the data)"
             )
-
-
-def _check_header(path: str | os.PathLike[str]) -> None:
-    """Refuse headers whose element counts cannot fit in the file, before plyfile allocates for them."""
-    try:
-        with open(path, "rb") as stream:
-            head = stream.read(_HEADER_LIMIT)
-            size = os.fstat(stream.fileno()).st_size
-    except OSError as exc:
-        raise SceneFormatError(f"{path}: cannot read ({exc.strerror})") from None
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        raise SceneFormatError(f"{path}: not a PLY file or header not terminated within {_HEADER_LIMIT} bytes")
-    body = size - end
-    ascii_format = b"format ascii" in head[:end]
-    for line in head[:end].splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0] == b"element":
-            try:
-                count = int(parts[2])
-            except ValueError:
-                raise SceneFormatError(f"{path}: element {parts[1]!r} has a non-integer count") from None
-            if count < 0:
-                raise SceneFormatError(
-                    f"{path}: element {parts[1].decode(errors='replace')} has negative count {count}"
-                )
-            # ASCII rows take at least 2 bytes ("0\n"), binary rows at least 1.
-            if count * (2 if ascii_format else 1) > body:
-                raise SceneFormatError(
-                    f"{path}: header claims {count} {parts[1].decode(errors='replace')} rows "
-                    f"but only {body} bytes follow it (truncated or corrupt)"
-                )

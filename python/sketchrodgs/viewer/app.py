@@ -28,10 +28,10 @@ import viser
 
 from ..camera import Camera
 from ..errors import SketchRodGSError
-from ..extract import Extraction
 from ..framing import AXES, frame_scene
 from ..images import save_png
 from ..io import save_scene
+from ..rod_file import Extraction
 from ..scene import GaussianScene
 from .camera import DEFAULT_WORKING_WIDTH, ViserView, framing_view, viser_view
 from .contact import SceneContact

@@ -17,9 +17,9 @@ import numpy as np
 
 from ..contact import SceneField
 from ..errors import SketchRodGSError
-from ..extract import Extraction
 from ..rig import Rig, clamped_end_weights
 from ..rod import ContactSettings, Rod, SimulationError, World
+from ..rod_file import Extraction
 from ..scene import GaussianScene
 from ..segment import check_rows
 from ..skin import BoundRod, skin_into

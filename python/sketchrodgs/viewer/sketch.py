@@ -15,7 +15,8 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import SketchRodGSError
-from ..extract import Extraction, extract_rod
+from ..extract import extract_rod
+from ..rod_file import Extraction
 from ..scene import GaussianScene
 from .camera import screen_to_pixels
 
