@@ -9,7 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sketchrodgs import Camera, extract_rod
 from sketchrodgs import deform_metrics as dm
+from sketchrodgs.polyline import nearest_on_polyline
 from sketchrodgs.realcases import load_cases
 from sketchrodgs.realpulls import PULLS, pull_case
 from sketchrodgs.scene import GaussianScene
@@ -169,6 +171,32 @@ def test_a_stand_leg_pulled_off_the_guitar_body_leaves_no_streaks_where_it_lay()
     now = pull_case(scenes[case["scene"]], case, "az135")
     assert now.left_behind < 0.005, now.left_behind
     assert now.tears < 0.003, now.tears
+
+
+@pytest.mark.parametrize("view", ["az000", "az045", "az090"])
+def test_the_stands_front_foot_leaves_the_leg_standing_on_it(view):
+    """The left leg stands on the front foot, and its Gaussians thin out a few radii above it: the
+    foot's rod carried that lower piece as an attached part (381-415 of the leg's Gaussians past
+    3 R of the foot's axis), and pulled, the piece swung off the rest of the leg. A piece of another
+    part now stays with it (docs/deformation.md, "Segmentation", A piece of another part)."""
+    scenes, cases = load_cases(CASES)
+    scene = scenes["guitar"]
+
+    def rod(name: str, view_name: str):
+        case = next(c for c in cases if c["name"] == name)
+        stroke = next(v for v in case["views"] if v["name"] == view_name)
+        camera = Camera.from_dict(stroke["camera"], view_name)
+        return case, extract_rod(scene, camera, np.asarray(stroke["stroke"], np.float64), radius=case["radius"])
+
+    leg_case, leg = rod("guitar_stand_leg_left", "az045")
+    off_leg, _ = nearest_on_polyline(scene.means.astype(np.float64), leg.polyline.astype(np.float64))
+    on_leg = off_leg <= leg_case["radius"]
+    foot_case, foot = rod("guitar_stand_foot_front", view)
+    ids = foot.gaussian_ids
+    off_foot, _ = nearest_on_polyline(scene.means[ids].astype(np.float64), foot.polyline.astype(np.float64))
+    carried = on_leg[ids] & (off_foot > 3 * foot_case["radius"])
+    assert on_leg.sum() > 1000 and carried.sum() == 0, carried.sum()
+    assert foot.binding.attached.sum() > 100  # what else hangs on the foot still rides with it
 
 
 def test_a_static_needle_lying_mostly_in_the_part_goes_with_it_in_pieces():

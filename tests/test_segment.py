@@ -215,6 +215,36 @@ def test_attaching_can_be_turned_off_and_the_size_limit_holds():
     assert not np.isin(leaf_rows, small.gaussian_ids[small.attached]).any()
 
 
+def test_a_piece_of_another_part_stays_with_it_but_a_whole_twig_and_a_leaf_ride_along():
+    # Below the tube, a leg (1 R square, 30 R long) stands on it, its Gaussians thinning out 6 R
+    # from the axis: a gap of 0.7 R, over the part's link (0.47 R here) but under two. Above, a
+    # twig 8 R long that ends free, and a leaf whose far edge comes within 0.7 R of a large sheet.
+    # (The stand's front foot carried the lower 40 px of the leg standing on it, which swung off
+    # the rest when pulled: docs/deformation.md, "Segmentation", A piece of another part.)
+    def column(x: float, y0: float, y1: float) -> np.ndarray:
+        return grid((x - 0.005, 0.05 + y0 * R, -0.005), (x + 0.005, 0.05 + y1 * R, 0.005), 0.002)
+
+    near_leg, far_leg = column(0.1, -6.0, -0.9), column(0.1, -30.0, -6.7)
+    twig = column(-0.2, 0.9, 8.0)
+    sheet = grid((0.25 - 3 * R, 0.05 + 10.7 * R, -0.001), (0.25 + 3 * R, 0.05 + 35 * R, 0.001), 0.002)
+    scene, rows = with_extras(
+        near_leg=near_leg, far_leg=far_leg, twig=twig, leaf=leaf_of_height(0.25, 10.0), sheet=sheet
+    )
+    ids = np.arange(len(scene))
+    beyond_part = ids[rows["near_leg"]][near_leg[:, 1] < 0.05 - 3 * R]
+    # the component the Rust step finds at the part's link: the leg's near piece is one
+    length = polyline_length(AXIS)
+    sizes = {"attach_size": default_attach_size(length, R), "attach_size_fewer": default_attach_size_fewer(length, R)}
+    rust = part_and_attached(AXIS, scene, R, grow=DEFAULT_GROW, **sizes)
+    assert np.isin(beyond_part, rust.gaussian_ids[rust.attached]).all()
+    binding = segment_and_bind(AXIS, scene, R)
+    assert not np.isin(beyond_part, binding.gaussian_ids).any()
+    assert not np.isin(ids[rows["far_leg"]], binding.gaussian_ids).any()
+    assert np.isin(ids[rows["twig"]], binding.gaussian_ids).all()
+    assert np.isin(ids[rows["leaf"]], binding.gaussian_ids).all()
+    assert not np.isin(ids[rows["sheet"]], binding.gaussian_ids).any()
+
+
 def test_a_small_cluster_of_floaters_past_an_end_rides_along_but_not_a_long_rail_or_a_touching_body():
     # above the tube 1.9 R from the axis: a 0.9 R gap from its surface, more than a link
     def blob(x: float) -> np.ndarray:

@@ -11,7 +11,10 @@ distance are neighbours, so a gap in the cloud separates parts):
 - attached parts: what hangs on the part and is small (every piece of it within `attach_size` of
   where it joins, or within `attach_size_fewer` where it holds no more Gaussians than the part; a
   leaf on its petiole, the leaves at a branch tip). Each rides rigidly with the rod point where it
-  joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach further and stay;
+  joins. Large bodies the rod joins (a pot, a trunk, a guitar body) reach further and stay, and so
+  does a piece of another slender part that joins the rod (a stand's leg on its foot): where that
+  part's Gaussians thin out, a piece of it is a component of its own at the part's link, and it
+  would swing off the rest (`_without_pieces_of_other_parts`);
 - continuations: what continues the part past an end and fits within `continuation_size` of it
   (the tip of a stem with its leaves, past where the stroke stopped); each rides rigidly with that
   end. A clamped end does not move, so they move only with a free end (`Animation(clamp=...)`);
@@ -85,6 +88,14 @@ HAZE_SCALE = 1.0
 # Specks: such clusters that reach within SPECK_RADII R of the axis anywhere along the rod lie inside
 # the part's tube, a piece of its surface the proximity graph did not reach: they ride with it.
 SPECK_RADII = 1.5
+# A piece of another part: an attached part of at least PIECE_MIN Gaussians shaped as a rod (the
+# second principal extent of its centres under PIECE_SHAPE of the first; a leaf is a sheet, 0.55-0.74)
+# whose far end (its centres within two links of the farthest from where it joins) comes within
+# PIECE_LINKS links of a centre nothing binds: the part it belongs to runs on there. A whole twig
+# ends free and rides along (docs/deformation.md, "Segmentation", A piece of another part).
+PIECE_MIN = 20
+PIECE_SHAPE = 0.4
+PIECE_LINKS = 2.0
 
 
 def default_attach_size(length: float, radius: float) -> float:
@@ -200,6 +211,7 @@ def segment_and_bind(
         colours=colours,
     )
     if attach:
+        binding = _without_pieces_of_other_parts(binding, polyline, means, radius)
         # a surface left out of the part does not continue it past an end either (a rope's tip
         # past the stroke lies on the floor, joined to all of it)
         bound = _Bound.of(binding, polyline, len(means))
@@ -208,6 +220,37 @@ def segment_and_bind(
         binding = _with_haze(binding, polyline, means, radius, scene, rows)
         binding = _with_specks(binding, polyline, means, radius, colours, surface)
     return replace(binding, gaussian_ids=rows[binding.gaussian_ids])
+
+
+def _without_pieces_of_other_parts(binding: Binding, polyline: np.ndarray, means: np.ndarray, radius: float) -> Binding:
+    """`binding` less the attached parts that are pieces of another part (`PIECE_SHAPE`). An
+    attached part is the Gaussians bound where it joins: the Rust step binds each of a part's
+    Gaussians at the one point where the part touches the rod."""
+    attached = np.flatnonzero(binding.attached)
+    if len(attached) < PIECE_MIN:
+        return binding
+    link = _link(np.take(means, binding.gaussian_ids[~binding.attached], axis=0), radius)
+    reach = PIECE_LINKS * link
+    joins = binding.segment[attached].astype(np.int64) << 32 | binding.t[attached].view(np.uint32)
+    _, part_of, counts = np.unique(joins, return_inverse=True, return_counts=True)
+    taken = np.zeros(len(means), bool)
+    taken[binding.gaussian_ids] = True
+    dropped = np.zeros(len(binding.attached), bool)
+    for k in np.flatnonzero(counts >= PIECE_MIN):
+        rows = attached[part_of == k]
+        centres = np.take(means, binding.gaussian_ids[rows], axis=0).astype(np.float64)
+        spread = centres - centres.mean(axis=0)
+        extents = np.sqrt(np.maximum(np.linalg.eigvalsh(spread.T @ spread / len(spread)), 0.0))  # ascending
+        if extents[1] > PIECE_SHAPE * extents[2]:
+            continue
+        where = point_at(polyline, binding.segment[rows[:1]], binding.t[rows[:1]])[0]
+        far = np.linalg.norm(centres - where, axis=1)
+        end = centres[far >= far.max() - 2 * link]
+        low, high = end.min(axis=0) - reach, end.max(axis=0) + reach
+        free = np.flatnonzero(~taken & np.all((means >= low) & (means <= high), axis=1))
+        if len(free) and np.isfinite(cKDTree(end).query(means[free], distance_upper_bound=reach)[0]).any():
+            dropped[rows] = True
+    return binding.take(np.flatnonzero(~dropped)) if dropped.any() else binding
 
 
 def _reach(radius: float, grow: float, attach_size: float, continuation_size: float) -> float:
