@@ -231,7 +231,8 @@ def _without_pieces_of_other_parts(binding: Binding, polyline: np.ndarray, means
         return binding
     link = _link(np.take(means, binding.gaussian_ids[~binding.attached], axis=0), radius)
     reach = PIECE_LINKS * link
-    joins = binding.segment[attached].astype(np.int64) << 32 | binding.t[attached].view(np.uint32)
+    t_bits = np.ascontiguousarray(binding.t[attached], np.float32).view(np.uint32)
+    joins = binding.segment[attached].astype(np.int64) << 32 | t_bits
     _, part_of, counts = np.unique(joins, return_inverse=True, return_counts=True)
     taken = np.zeros(len(means), bool)
     taken[binding.gaussian_ids] = True
