@@ -553,14 +553,12 @@ def _radius_by_colour(
     pixels = pixels[(shown >= 0) & _part_coloured(scene.colors_of(np.maximum(shown, 0)), trace.colours)]
     if len(pixels) == 0:
         return None
-    tangent = np.gradient(clean, axis=0)
-    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    normal = _normals_on_screen(clean)
     nearest = np.argmin(((pixels[:, None, :] - clean[None]) ** 2).sum(axis=2), axis=1)
     height, width = index.shape
     steps = np.arange(1, max(width, height) // 8 + 1)
     start = depth[pixels[:, 1], pixels[:, 0]]
-    gap = np.maximum(3 * radius, _GAP_FLOOR_PX * start / focal)[:, None]
+    gap = _depth_gap(radius, start, focal)[:, None]
     reach = []
     for sign in (1, -1):
         walk = np.rint(pixels[:, None, :] + sign * steps[None, :, None] * normal[nearest][:, None, :]).astype(np.int64)
@@ -706,6 +704,19 @@ def _near_the_path(path: cKDTree, ids: np.ndarray, means: np.ndarray, camera: Ca
     return ids[near]
 
 
+def _normals_on_screen(line: np.ndarray) -> np.ndarray:
+    """(M, 2) unit normals of a polyline on screen (M, 2), across its local direction."""
+    direction = np.gradient(line, axis=0)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    return normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+
+
+def _depth_gap(radius: float, depth: np.ndarray, focal: float) -> np.ndarray:
+    """The depth gap between surfaces at camera `depth`: 3 R, but at least `_GAP_FLOOR_PX` pixels'
+    world size there (as the search's, `depth_gap` in rust/sketchrodgs-path/src/lib.rs)."""
+    return np.maximum(3 * radius, _GAP_FLOOR_PX * depth / focal)
+
+
 def _outlined_scale(
     points: np.ndarray, camera: Camera, partial: PartialRender, radius: float, stroke: np.ndarray, band_px: float
 ) -> np.ndarray:
@@ -723,9 +734,7 @@ def _outlined_scale(
     solid, depth = result.is_solid(), result.index_depth
     height, width = solid.shape
     uv, z = camera.project(points)
-    direction = np.gradient(uv, axis=0)
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    normal = _normals_on_screen(uv)
     px = radius * camera.fx / np.maximum(z, 1e-12)  # R on screen at each point
     reach_px = pl.REACHES[0] * px
     steps = np.arange(1, int(np.ceil(min(reach_px.max(), max(width, height)))) + 1)
@@ -734,7 +743,7 @@ def _outlined_scale(
     at = np.clip(start, 0, [width - 1, height - 1])
     seen = inside & solid[at[:, 1], at[:, 0]]
     start_depth = depth[at[:, 1], at[:, 0]]
-    gap = np.maximum(3 * radius, _GAP_FLOOR_PX * start_depth / camera.fx)
+    gap = _depth_gap(radius, start_depth, camera.fx)
     # both walks of every point at once: (2, M, steps, 2) pixels, one side each
     sides = np.array([1.0, -1.0])[:, None, None, None]
     walk = np.rint(uv[None, :, None, :] + sides * steps[None, None, :, None] * normal[None, :, None, :]).astype(

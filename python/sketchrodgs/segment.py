@@ -247,8 +247,10 @@ def _without_pieces_of_other_parts(binding: Binding, polyline: np.ndarray, means
         where = point_at(polyline, binding.segment[rows[:1]], binding.t[rows[:1]])[0]
         far = np.linalg.norm(centres - where, axis=1)
         end = centres[far >= far.max() - 2 * link]
-        low, high = end.min(axis=0) - reach, end.max(axis=0) + reach
-        free = np.flatnonzero(~taken & np.all((means >= low) & (means <= high), axis=1))
+        # the box around the far end a little wider than the reach (the box is float32), then the distances
+        pad = 1.001 * reach
+        near = _core.rows_in_box(means, tuple(end.min(axis=0) - pad), tuple(end.max(axis=0) + pad))
+        free = near[~taken[near]]
         if len(free) and np.isfinite(cKDTree(end).query(means[free], distance_upper_bound=reach)[0]).any():
             dropped[rows] = True
     return binding.take(np.flatnonzero(~dropped)) if dropped.any() else binding
